@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The two fresh-machine commands:
+#   ./run.sh demo   -> the main job (headless simulation, writes a report folder)
+#   ./run.sh test   -> ruff + the whole pytest suite
+# Both create ./.venv and install the project on first use (and again when pyproject.toml changes).
+set -euo pipefail
+cd "$(dirname "$0")"
+VENV=.venv
+STAMP="$VENV/.lapwrench-installed"
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+
+setup() {
+    if [ ! -x "$VENV/bin/python" ]; then
+        python3.11 -m venv "$VENV" 2>/dev/null || python3 -m venv "$VENV"
+    fi
+    if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$want" ]; then
+        echo "[lapwrench] installing into $VENV (first use) ..." >&2
+        "$VENV/bin/python" -m pip install -q --upgrade pip >&2
+        "$VENV/bin/python" -m pip install -q -e ".[dev]" >&2
+        echo "$want" > "$STAMP"
+    fi
+    # Headless rendering (MuJoCo through EGL/Mesa): install the Debian libraries if absent.
+    if ! ldconfig -p | grep -q "libEGL.so.1" || ! ldconfig -p | grep -q "libEGL_mesa"; then
+        if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+            echo "[lapwrench] installing EGL/Mesa for headless rendering ..." >&2
+            (apt-get update -qq && apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri) >&2
+        else
+            echo "[lapwrench] warning: libEGL/Mesa missing; install libegl1 libegl-mesa0 libgl1-mesa-dri" >&2
+        fi
+    fi
+}
+
+cmd=${1:-}
+shift || true
+export MUJOCO_GL=${MUJOCO_GL:-egl}
+case "$cmd" in
+    demo)
+        setup
+        exec "$VENV/bin/lapwrench" demo "$@"
+        ;;
+    test)
+        setup
+        "$VENV/bin/ruff" check src tests bench
+        exec "$VENV/bin/python" -m pytest -q "$@"
+        ;;
+    setup)
+        setup
+        ;;
+    *)
+        echo "usage: ./run.sh demo [options] | ./run.sh test [pytest args] | ./run.sh setup" >&2
+        exit 2
+        ;;
+esac

@@ -1,0 +1,1 @@
+"""Robot description, Pinocchio model and per-tick kinematics."""

@@ -1,0 +1,215 @@
+"""The robot description shared by the controller (Pinocchio) and the simulator (MuJoCo).
+
+The arm URDF comes from a packaged robot description (``example-robot-data`` for the Panda,
+``franky-sim`` for the FR3). The gripper is removed and a laparoscope is rigidly mounted on the
+flange as extra URDF links, so that Pinocchio and MuJoCo load the *same* text.
+
+Frames (paper Sec. II-B). All are parallel to {E} by default:
+
+- ``lap_E``: end-effector {E}, the flange, where the scope is mounted; +z runs along the shaft.
+- ``lap_H``: handle {H}, where the F/T sensor sits, ``handle_offset`` along +z from {E}.
+- ``lap_C``: camera {C} at the scope tip, ``L`` along +z. With an oblique scope it is rotated
+  about x_E by ``oblique_angle_deg`` (the paper's convention is the parallel frame).
+- ``lap_tip``: the distal end of the shaft (same origin as {C}, always parallel to {E}).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+RobotKind = Literal["panda", "fr3"]
+ROBOT_KINDS: tuple[RobotKind, ...] = ("panda", "fr3")
+
+FRAME_E = "lap_E"
+FRAME_H = "lap_H"
+FRAME_C = "lap_C"
+FRAME_TIP = "lap_tip"
+
+
+class RobotDescriptionError(RuntimeError):
+    """The robot description could not be found or parsed."""
+
+
+@dataclass(frozen=True)
+class ArmSpec:
+    """Names that differ between the Panda and FR3 descriptions."""
+
+    joint_names: tuple[str, ...]
+    flange_link: str
+    base_link: str
+
+
+ARM_SPECS: dict[str, ArmSpec] = {
+    "panda": ArmSpec(tuple(f"panda_joint{i}" for i in range(1, 8)), "panda_link8", "panda_link0"),
+    "fr3": ArmSpec(tuple(f"joint{i}" for i in range(1, 8)), "link8", "link0"),
+}
+
+
+@dataclass(frozen=True)
+class ScopeGeometry:
+    """Laparoscope assembly mounted on the flange.
+
+    ``length`` is the paper's L (Sec. IV-A, 0.29 m). Masses are those of a typical 10 mm scope,
+    a handle with a HEX-E class F/T sensor and a mounting adapter.
+    """
+
+    length: float = 0.29
+    shaft_diameter: float = 0.010
+    shaft_mass: float = 0.25
+    handle_offset: float = 0.04
+    handle_mass: float = 0.55
+    handle_radius: float = 0.02
+    handle_length: float = 0.06
+    oblique_angle_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("length", "shaft_diameter", "shaft_mass", "handle_mass", "handle_radius", "handle_length"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"scope.{name} must be a positive finite number, got {value!r}")
+        if not (0.0 <= self.handle_offset < self.length):
+            raise ValueError(f"scope.handle_offset must lie in [0, length), got {self.handle_offset!r}")
+        if not (0.0 <= self.oblique_angle_deg < 90.0):
+            raise ValueError(f"scope.oblique_angle_deg must lie in [0, 90), got {self.oblique_angle_deg!r}")
+
+
+def _panda_urdf_path() -> Path:
+    try:
+        files = importlib.metadata.files("example-robot-data") or []
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise RobotDescriptionError("the Panda needs the 'example-robot-data' package") from exc
+    for f in files:
+        if str(f).endswith("panda_description/urdf/panda.urdf"):
+            return Path(str(f.locate()))
+    raise RobotDescriptionError("example-robot-data is installed but ships no panda_description/urdf/panda.urdf")
+
+
+def _fr3_urdf_path() -> Path:
+    try:
+        import franky_sim
+    except ImportError as exc:
+        raise RobotDescriptionError("the FR3 description comes with 'franky-sim': pip install franky-sim") from exc
+    path = Path(franky_sim.__file__).parent / "assets" / "fr3_clean.urdf"
+    if not path.is_file():
+        raise RobotDescriptionError(f"franky-sim ships no FR3 URDF at {path}")
+    return path
+
+
+def arm_urdf_path(kind: RobotKind) -> Path:
+    """Path of the packaged arm URDF for ``kind``."""
+    if kind == "panda":
+        return _panda_urdf_path()
+    if kind == "fr3":
+        return _fr3_urdf_path()
+    raise RobotDescriptionError(f"unknown robot {kind!r}; choose one of {ROBOT_KINDS}")
+
+
+def _resolve_mesh_paths(root: ET.Element, urdf_path: Path) -> None:
+    """Turn ``package://`` and relative mesh names into absolute paths."""
+    share = urdf_path.parent
+    while share.name and share.name != "share" and share.parent != share:
+        share = share.parent
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename", "")
+        if name.startswith("package://"):
+            rel = name[len("package://") :]
+            candidates = [share / rel, urdf_path.parent / rel, urdf_path.parent.parent / Path(rel).name]
+            candidates += [urdf_path.parent / Path(*Path(rel).parts[1:])]
+            found = next((c for c in candidates if c.is_file()), candidates[0])
+            mesh.set("filename", str(found))
+        elif name and not Path(name).is_absolute():
+            mesh.set("filename", str((urdf_path.parent / name).resolve()))
+
+
+def _strip_below(root: ET.Element, keep_link: str) -> None:
+    """Remove every link and joint hanging below ``keep_link`` (gripper, fingers, TCP)."""
+    children: dict[str, list[tuple[ET.Element, str]]] = {}
+    for joint in root.findall("joint"):
+        parent = joint.find("parent")
+        child = joint.find("child")
+        if parent is not None and child is not None:
+            children.setdefault(parent.get("link", ""), []).append((joint, child.get("link", "")))
+    doomed_links: set[str] = set()
+    stack = [c for _, c in children.get(keep_link, [])]
+    for joint, _ in children.get(keep_link, []):
+        root.remove(joint)
+    while stack:
+        link = stack.pop()
+        doomed_links.add(link)
+        for joint, child in children.get(link, []):
+            root.remove(joint)
+            stack.append(child)
+    for link in root.findall("link"):
+        if link.get("name") in doomed_links:
+            root.remove(link)
+    for tag in ("transmission", "gazebo"):
+        for el in root.findall(tag):
+            root.remove(el)
+
+
+def _cylinder_inertia(mass: float, radius: float, length: float) -> dict[str, str]:
+    ixx = mass * (3.0 * radius**2 + length**2) / 12.0
+    izz = 0.5 * mass * radius**2
+    return {"ixx": f"{ixx:.9g}", "iyy": f"{ixx:.9g}", "izz": f"{izz:.9g}", "ixy": "0", "ixz": "0", "iyz": "0"}
+
+
+def _add_link(
+    root: ET.Element,
+    name: str,
+    parent: str,
+    xyz: tuple[float, float, float],
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    *,
+    mass: float = 0.0,
+    radius: float = 0.0,
+    length: float = 0.0,
+    com_z: float = 0.0,
+) -> None:
+    link = ET.SubElement(root, "link", name=name)
+    if mass > 0.0:
+        inertial = ET.SubElement(link, "inertial")
+        ET.SubElement(inertial, "origin", xyz=f"0 0 {com_z:.9g}", rpy="0 0 0")
+        ET.SubElement(inertial, "mass", value=f"{mass:.9g}")
+        ET.SubElement(inertial, "inertia", **_cylinder_inertia(mass, radius, length))
+        for tag in ("visual", "collision"):
+            el = ET.SubElement(link, tag)
+            ET.SubElement(el, "origin", xyz=f"0 0 {com_z:.9g}", rpy="0 0 0")
+            geom = ET.SubElement(el, "geometry")
+            ET.SubElement(geom, "cylinder", radius=f"{radius:.9g}", length=f"{length:.9g}")
+    joint = ET.SubElement(root, "joint", name=f"{name}_joint", type="fixed")
+    ET.SubElement(joint, "origin", xyz=" ".join(f"{v:.9g}" for v in xyz), rpy=" ".join(f"{v:.9g}" for v in rpy))
+    ET.SubElement(joint, "parent", link=parent)
+    ET.SubElement(joint, "child", link=name)
+
+
+def build_urdf(kind: RobotKind = "panda", scope: ScopeGeometry | None = None) -> str:
+    """URDF text of the 7-DoF arm without gripper, with the laparoscope on its flange."""
+    scope = scope or ScopeGeometry()
+    path = arm_urdf_path(kind)
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise RobotDescriptionError(f"cannot parse {path}: {exc}") from exc
+    spec = ARM_SPECS[kind]
+    _resolve_mesh_paths(root, path)
+    _strip_below(root, spec.flange_link)
+    L = scope.length
+    _add_link(root, FRAME_E, spec.flange_link, (0.0, 0.0, 0.0))
+    _add_link(
+        root, "lap_handle", FRAME_E, (0.0, 0.0, 0.0),
+        mass=scope.handle_mass, radius=scope.handle_radius, length=scope.handle_length, com_z=scope.handle_offset,
+    )
+    _add_link(
+        root, "lap_shaft", FRAME_E, (0.0, 0.0, 0.0),
+        mass=scope.shaft_mass, radius=scope.shaft_diameter / 2.0, length=L, com_z=L / 2.0,
+    )
+    _add_link(root, FRAME_H, FRAME_E, (0.0, 0.0, scope.handle_offset))
+    _add_link(root, FRAME_TIP, FRAME_E, (0.0, 0.0, L))
+    _add_link(root, FRAME_C, FRAME_E, (0.0, 0.0, L), (-math.radians(scope.oblique_angle_deg), 0.0, 0.0))
+    root.set("name", f"{kind}_laparoscope")
+    return ET.tostring(root, encoding="unicode")
