@@ -20,7 +20,8 @@ setup() {
         echo "$want" > "$STAMP"
     fi
     # Headless rendering (MuJoCo through EGL/Mesa): install the Debian libraries if absent.
-    if ! ldconfig -p | grep -q "libEGL.so.1" || ! ldconfig -p | grep -q "libEGL_mesa"; then
+    libs=$(ldconfig -p)
+    if [[ "$libs" != *libEGL.so.1* || "$libs" != *libEGL_mesa* ]]; then
         if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
             echo "[lapwrench] installing EGL/Mesa for headless rendering ..." >&2
             (apt-get update -qq && apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri) >&2
