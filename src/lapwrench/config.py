@@ -1,0 +1,251 @@
+"""Configuration: one YAML file, validated on load.
+
+The defaults (``data/default.yaml``) are the paper's Sec. IV-A parameters. Loading checks every
+key against these dataclasses: an unknown key, a wrong type, a non-positive gain or threshold,
+or an inconsistent pair (epsilon2 <= epsilon1, gamma2 <= gamma1) raises :class:`ConfigError`
+naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+
+Ramp = Literal["printed", "c1"]
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, unknown, of the wrong type or out of range."""
+
+
+def _positive(**kw: Any) -> Any:
+    return field(metadata={"check": "positive"}, **kw)
+
+
+def _nonnegative(**kw: Any) -> Any:
+    return field(metadata={"check": "nonnegative"}, **kw)
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    kind: Literal["panda", "fr3"] = "panda"
+    control_rate_hz: float = _positive(default=1000.0)
+    limit_fraction: float = _positive(default=0.9)
+    position_margin: float = _nonnegative(default=0.05)
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.control_rate_hz
+
+
+@dataclass(frozen=True)
+class ScopeConfig:
+    length: float = _positive(default=0.29)
+    lambda0: float = _positive(default=0.8)
+    handle_offset: float = _nonnegative(default=0.04)
+    oblique_angle_deg: float = _nonnegative(default=0.0)
+
+
+@dataclass(frozen=True)
+class InteractionConfig:
+    k_H: float = _positive(default=2000.0)
+    k_min: int = _nonnegative(default=3)
+    contact_threshold: int = _nonnegative(default=0)
+    force_range: float = _positive(default=200.0)
+    torque_range: float = _positive(default=10.0)
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    width: int = _positive(default=640)
+    height: int = _positive(default=480)
+    fx: float = _positive(default=506.57)
+    fy: float = _positive(default=506.72)
+    u0: float = _positive(default=312.22)
+    v0: float = _positive(default=243.39)
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    epsilon1: float = _positive(default=50.0)
+    epsilon2: float = _positive(default=200.0)
+    F_max: float = _positive(default=10.0)
+    ramp: Ramp = "printed"
+    direction: Literal["printed", "image_plane"] = "printed"
+
+
+@dataclass(frozen=True)
+class RcmConfig:
+    Kp: float = _positive(default=300.0)
+    Kd: float = _positive(default=20.0)
+
+
+@dataclass(frozen=True)
+class AdaptiveRcmConfig:
+    enabled: bool = True
+    F_op: float = _positive(default=10.0)
+    gamma1: float = _positive(default=5.0)
+    gamma2: float = _positive(default=15.0)
+    ramp: Ramp = "printed"
+    alpha: float = _positive(default=0.003)
+    beta: float = _positive(default=0.05)
+    epsilon: float = _positive(default=5e-4)
+
+
+@dataclass(frozen=True)
+class ViscousConfig:
+    k_t: float = _positive(default=150.0)
+    k_f: float = _positive(default=2.0)
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    integrator: Literal["semi_implicit", "explicit"] = "semi_implicit"
+    self_motion_damping: float = _nonnegative(default=10.0)
+    rcm_task: Literal["lateral", "printed"] = "lateral"
+
+
+@dataclass(frozen=True)
+class InputsConfig:
+    max_rcm_error: float = _positive(default=0.02)
+    max_image_age: float = _positive(default=0.2)
+
+
+@dataclass(frozen=True)
+class Config:
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    scope: ScopeConfig = field(default_factory=ScopeConfig)
+    interaction: InteractionConfig = field(default_factory=InteractionConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    rcm: RcmConfig = field(default_factory=RcmConfig)
+    adaptive_rcm: AdaptiveRcmConfig = field(default_factory=AdaptiveRcmConfig)
+    viscous: ViscousConfig = field(default_factory=ViscousConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    inputs: InputsConfig = field(default_factory=InputsConfig)
+
+    def replace(self, **sections: dict[str, Any]) -> Config:
+        """A copy with some values changed, e.g. ``cfg.replace(tracking={"ramp": "c1"})``; validated."""
+        data = to_dict(self)
+        for section, values in sections.items():
+            if section not in data:
+                raise ConfigError(f"unknown config section '{section}'")
+            data[section].update(values)
+        return from_dict(data)
+
+
+def _check_value(key: str, value: Any, annotation: Any, check: str | None) -> Any:
+    origin = typing.get_origin(annotation)
+    if origin is Literal:
+        allowed = typing.get_args(annotation)
+        if value not in allowed:
+            raise ConfigError(f"config key '{key}' must be one of {list(allowed)}, got {value!r}")
+        return value
+    if annotation is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"config key '{key}' must be true or false, got {value!r}")
+        return value
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"config key '{key}' must be an integer, got {value!r}")
+    elif annotation is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"config key '{key}' must be a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"config key '{key}' must be finite, got {value!r}")
+    if check == "positive" and not value > 0:
+        raise ConfigError(f"config key '{key}' must be positive, got {value!r}")
+    if check == "nonnegative" and not value >= 0:
+        raise ConfigError(f"config key '{key}' must be non-negative, got {value!r}")
+    return value
+
+
+def _build(cls: type, data: Any, prefix: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"config section '{prefix or 'root'}' must be a mapping, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in fields:
+            where = f"{prefix}.{key}" if prefix else str(key)
+            raise ConfigError(f"unknown config key '{where}'; known keys here: {sorted(fields)}")
+    kwargs = {}
+    for name, f in fields.items():
+        key = f"{prefix}.{name}" if prefix else name
+        if name not in data:
+            continue
+        annotation = hints[name]
+        if dataclasses.is_dataclass(annotation):
+            kwargs[name] = _build(annotation, data[name], key)
+        else:
+            kwargs[name] = _check_value(key, data[name], annotation, f.metadata.get("check"))
+    return cls(**kwargs)
+
+
+def _check_consistency(cfg: Config) -> None:
+    if cfg.tracking.epsilon2 <= cfg.tracking.epsilon1:
+        raise ConfigError(
+            f"config key 'tracking.epsilon2' ({cfg.tracking.epsilon2}) must exceed "
+            f"'tracking.epsilon1' ({cfg.tracking.epsilon1})"
+        )
+    if cfg.adaptive_rcm.gamma2 <= cfg.adaptive_rcm.gamma1:
+        raise ConfigError(
+            f"config key 'adaptive_rcm.gamma2' ({cfg.adaptive_rcm.gamma2}) must exceed "
+            f"'adaptive_rcm.gamma1' ({cfg.adaptive_rcm.gamma1})"
+        )
+    if not cfg.scope.lambda0 < 1.0:
+        raise ConfigError(f"config key 'scope.lambda0' must lie in (0, 1), got {cfg.scope.lambda0}")
+    if not cfg.scope.handle_offset < cfg.scope.length:
+        raise ConfigError("config key 'scope.handle_offset' must be shorter than 'scope.length'")
+    if not cfg.scope.oblique_angle_deg < 90.0:
+        raise ConfigError("config key 'scope.oblique_angle_deg' must be below 90")
+    if not cfg.robot.limit_fraction <= 1.0:
+        raise ConfigError(f"config key 'robot.limit_fraction' must lie in (0, 1], got {cfg.robot.limit_fraction}")
+
+
+def from_dict(data: dict[str, Any]) -> Config:
+    """Validate a nested mapping and build a :class:`Config` (missing keys take the defaults)."""
+    cfg = _build(Config, data, "")
+    _check_consistency(cfg)
+    return cfg
+
+
+def to_dict(cfg: Config) -> dict[str, Any]:
+    return dataclasses.asdict(cfg)
+
+
+def load(path: str | Path | None = None) -> Config:
+    """Load a YAML configuration file; ``None`` gives the packaged defaults."""
+    if path is None:
+        text = resources.files("lapwrench").joinpath("data/default.yaml").read_text()
+        source = "default.yaml"
+    else:
+        p = Path(path)
+        if not p.is_file():
+            raise ConfigError(f"config file not found: {p}")
+        text = p.read_text()
+        source = str(p)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{source} is not valid YAML: {exc}") from exc
+    if data is None:
+        data = {}
+    try:
+        return from_dict(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from exc
+
+
+def dump(cfg: Config, path: str | Path) -> None:
+    Path(path).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+
+

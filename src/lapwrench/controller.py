@@ -1,0 +1,226 @@
+"""The control tick, top-down like the paper's Fig. 3:
+
+sensors → wrenches → task/null-space allocation → integration → limits → command.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from lapwrench.allocation import (
+    nullspace_projector,
+    nullspace_torque,
+    nullspace_wrench,
+    task_priority_torque,
+    weighted_pseudo_inverse,
+)
+from lapwrench.config import Config
+from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
+from lapwrench.motion.virtual_model import euler_velocity_step, self_motion_damping
+from lapwrench.rcm.adaptive import AdaptiveRcm, residual_force
+from lapwrench.rcm.geometry import (
+    closest_point,
+    closest_point_jacobian,
+    closest_point_parameter,
+    initial_rcm_point,
+    lateral_rcm_jacobian,
+    rcm_error,
+    rcm_error_rate,
+    rcm_jacobian,
+)
+from lapwrench.robot.description import ScopeGeometry
+from lapwrench.robot.model import Kinematics, RobotModel
+from lapwrench.sensors import InputEvent, InputValidator, SensorFrame, ValidInputs
+from lapwrench.spatial import Vec
+from lapwrench.wrenches import InteractionWrench, RcmWrench, TrackingWrench, ViscousWrench
+from lapwrench.wrenches.base import DampingSource, TaskGeometry, TickContext, WrenchSource
+
+Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
+
+
+def classify_mode(handle_force: float, tracking_force: float) -> Mode:
+    """The paper's modes (Sec. IV-D): which of W_h and W_c is active, and which dominates."""
+    h, c = handle_force > 1e-9, tracking_force > 1e-9
+    if h and c:
+        return "handle-dominant" if handle_force > tracking_force else "handle+tracking"
+    if h:
+        return "handle"
+    return "tracking" if c else "idle"
+
+
+@dataclass(frozen=True)
+class TickResult:
+    time: float
+    q_ref: Vec
+    dq_ref: Vec
+    ddq_ref: Vec
+    tau: Vec
+    wrenches: dict[str, Vec]
+    W_n: Vec
+    e_R: Vec
+    p_R: Vec
+    p_G: Vec
+    delta: float
+    contacts: int
+    mode: Mode
+    residual_lateral: Vec
+    events: list[InputEvent] = field(default_factory=list)
+
+    @property
+    def rcm_error(self) -> float:
+        return float(np.linalg.norm(self.e_R))
+
+
+class Controller:
+    """The unified wrench controller (paper Sec. III) producing 1 kHz joint position references."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        model: RobotModel | None = None,
+        extra_sources: Sequence[WrenchSource] = (),
+    ) -> None:
+        self.cfg = cfg
+        self.model = model or RobotModel(
+            cfg.robot.kind,
+            ScopeGeometry(
+                length=cfg.scope.length,
+                handle_offset=cfg.scope.handle_offset,
+                oblique_angle_deg=cfg.scope.oblique_angle_deg,
+            ),
+        )
+        self.dt = cfg.robot.dt
+        self.validator = InputValidator(
+            cfg.interaction, cfg.camera, self.model.limits, cfg.inputs.max_image_age
+        )
+        self.interaction = InteractionWrench(cfg.interaction)
+        self.tracking = TrackingWrench(cfg.camera, cfg.tracking)
+        self.viscous = ViscousWrench(cfg.viscous)
+        self.rcm_wrench = RcmWrench(cfg.rcm)
+        self.null_sources: list[WrenchSource] = [self.interaction, self.tracking, self.viscous, *extra_sources]
+        self.shaper = ReferenceShaper(
+            self.model.limits, self.dt, cfg.robot.limit_fraction, cfg.robot.position_margin
+        )
+        self.ref: ReferenceState | None = None
+        self.rcm: AdaptiveRcm | None = None
+        self.events: list[InputEvent] = []
+
+    # -- setup --------------------------------------------------------------------------------
+    def reset(self, q0: Vec, p_R: Vec | None = None) -> None:
+        """Start at rest at ``q0``; the RCM point is eq (18) unless ``p_R`` is given."""
+        q0 = np.asarray(q0, dtype=float)
+        if q0.shape != (7,) or not np.all(np.isfinite(q0)):
+            raise ValueError("initial configuration must be 7 finite joint positions")
+        lim = self.model.limits
+        if np.any(q0 < lim.position_lower) or np.any(q0 > lim.position_upper):
+            raise ValueError("initial configuration is outside the joint limits")
+        self.ref = ReferenceState(q0.copy(), np.zeros(7), np.zeros(7))
+        kin = self.model.kinematics(q0, np.zeros(7))
+        if p_R is None:
+            p_R = initial_rcm_point(kin, self.cfg.scope.length, self.cfg.scope.lambda0)
+        self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
+        self.events = []
+
+    # -- the tick -----------------------------------------------------------------------------
+    def tick(self, frame: SensorFrame) -> TickResult:
+        if self.ref is None or self.rcm is None:
+            raise RuntimeError("call Controller.reset(q0) before tick()")
+        # 1. sensors: validate at the edge; kinematics at the reference (the virtual model's state)
+        inputs = self.validator.validate(frame)
+        self.events.extend(inputs.events)
+        kin = self.model.kinematics(self.ref.q, self.ref.dq)
+        Minv = np.linalg.inv(kin.M)
+
+        # 2. adaptive RCM point (eq 19-26)
+        residual = self._residual(kin, inputs)
+        residual_lateral = self.rcm.update(kin.P, residual, self.dt)
+
+        # 3. task geometry (eq 27-36)
+        geo = self._geometry(kin)
+        ctx = TickContext(frame.time, kin, geo, inputs)
+
+        # 4. wrenches
+        W_r = self.rcm_wrench.compute(ctx)
+        null_wrenches = [s.compute(ctx) for s in self.null_sources]
+
+        # 5. task/null-space allocation (eq 2-4, 37-38)
+        lateral = self.cfg.motion.rcm_task == "lateral"
+        J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z if lateral else None)
+        N_r = nullspace_projector(geo.J_R, J_pinv)
+        W_n = nullspace_wrench(null_wrenches, geo.p_G)
+        tau_n = nullspace_torque(geo.J_G, W_n)
+        B_self = self_motion_damping(kin, Minv, self.cfg.motion.self_motion_damping)
+        tau = task_priority_torque(geo.J_R, W_r.force, N_r, tau_n) - B_self @ kin.dq
+
+        # 6. integration of the virtual model
+        damping = self._damping(geo, N_r) + B_self
+        if not np.all(np.isfinite(tau)):
+            self.events.append(InputEvent(frame.time, "controller", "non-finite torque; braking"))
+            tau = np.zeros(7)
+        dq_next = euler_velocity_step(kin, tau, damping, self.dt, self.cfg.motion.integrator)
+
+        # 7. limits → command
+        self.ref = self.shaper.step(self.ref, dq_next)
+
+        wrenches = {"rcm": W_r.vector, **{s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)}}
+        F_h = float(np.linalg.norm(wrenches["interaction"][3:]))
+        F_c = float(np.linalg.norm(wrenches["tracking"][3:]))
+        if np.linalg.norm(geo.e_R) > self.cfg.inputs.max_rcm_error:
+            self.events.append(InputEvent(frame.time, "rcm", f"RCM error {np.linalg.norm(geo.e_R)*1e3:.1f} mm"))
+        return TickResult(
+            time=frame.time,
+            q_ref=self.ref.q.copy(),
+            dq_ref=self.ref.dq.copy(),
+            ddq_ref=self.ref.ddq.copy(),
+            tau=tau,
+            wrenches=wrenches,
+            W_n=W_n,
+            e_R=geo.e_R,
+            p_R=self.rcm.p_R.copy(),
+            p_G=geo.p_G,
+            delta=self.interaction.delta,
+            contacts=self.interaction.contacts,
+            mode=classify_mode(F_h, F_c),
+            residual_lateral=residual_lateral,
+            events=inputs.events,
+        )
+
+    # -- pieces of the tick -------------------------------------------------------------------
+    def _residual(self, kin: Kinematics, inputs: ValidInputs) -> Vec | None:
+        """ΔF (eq 19) when both the F/T reading and the robot's force estimate are valid."""
+        if inputs.ft is None or inputs.robot is None or inputs.robot.external_force is None:
+            return None
+        return residual_force(kin.R_H @ inputs.ft.force, inputs.robot.external_force)
+
+    def _geometry(self, kin: Kinematics) -> TaskGeometry:
+        assert self.rcm is not None
+        p_R, L = self.rcm.p_R, self.cfg.scope.length
+        if self.cfg.motion.rcm_task == "lateral":
+            J_R = lateral_rcm_jacobian(kin, p_R)
+        else:
+            J_R = rcm_jacobian(kin, p_R)
+        s_star = closest_point_parameter(kin, p_R, L)
+        p_G, o_G = closest_point(kin, s_star, L)
+        return TaskGeometry(
+            p_R=p_R,
+            rcm_velocity=self.rcm.velocity,
+            e_R=rcm_error(kin, p_R),
+            e_R_rate=rcm_error_rate(kin, J_R, self.rcm.velocity),
+            J_R=J_R,
+            s_star=s_star,
+            p_G=p_G,
+            o_G=o_G,
+            J_G=closest_point_jacobian(kin, o_G),
+        )
+
+    def _damping(self, geo: TaskGeometry, N_r: np.ndarray) -> np.ndarray:
+        """B = J_Rᵀ K_d J_R + N_rᵀ J_Gᵀ D J_G: the θ̇-Jacobian of -τ from eq (14) and the damping sources."""
+        B = self.cfg.rcm.Kd * geo.J_R.T @ geo.J_R
+        for s in self.null_sources:
+            if isinstance(s, DampingSource):
+                B = B + N_r.T @ geo.J_G.T @ s.damping_matrix() @ geo.J_G
+        return B

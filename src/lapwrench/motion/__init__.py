@@ -1,0 +1,1 @@
+"""Motion generation: the virtual model, its Euler integration and the reference shaper."""

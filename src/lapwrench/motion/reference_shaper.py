@@ -1,0 +1,67 @@
+"""Shapes joint position references so they never break the Franka limits.
+
+libfranka differentiates the commanded positions: v = Δq/dt, a = Δv/dt, j = Δa/dt. Each tick the
+shaper takes the desired next velocity and clamps, per joint, the acceleration to the interval
+allowed by
+
+1. the jerk limit around the previous acceleration,
+2. the acceleration limit,
+3. the velocity limit,
+4. the position limits: the velocity toward a limit must let the joint stop before it with a
+   braking deceleration (half the acceleration limit, leaving room for the jerk ramp),
+
+with the jerk band taking precedence when the bands do not intersect. Limits are the robot's
+scaled by ``limit_fraction``; positions keep ``position_margin`` clear of the hard limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lapwrench.robot.limits import JointLimits
+from lapwrench.spatial import Vec
+
+
+@dataclass
+class ReferenceState:
+    q: Vec
+    dq: Vec
+    ddq: Vec
+
+
+class ReferenceShaper:
+    def __init__(self, limits: JointLimits, dt: float, limit_fraction: float, position_margin: float) -> None:
+        self.lim = limits.scaled(limit_fraction)
+        self.dt = dt
+        self.q_lo = limits.position_lower + position_margin
+        self.q_hi = limits.position_upper - position_margin
+        self.a_brake = 0.5 * self.lim.acceleration
+        self.clamped_ticks = 0
+
+    def _velocity_bounds(self, q: Vec) -> tuple[Vec, Vec]:
+        room_hi = np.maximum(self.q_hi - q, 0.0)
+        room_lo = np.maximum(q - self.q_lo, 0.0)
+        v_hi = np.minimum(self.lim.velocity, np.sqrt(2.0 * self.a_brake * room_hi))
+        v_lo = -np.minimum(self.lim.velocity, np.sqrt(2.0 * self.a_brake * room_lo))
+        return v_lo, v_hi
+
+    def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
+        """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` that respects every limit."""
+        dt = self.dt
+        a_des = (dq_desired - state.dq) / dt
+        if not np.all(np.isfinite(a_des)):
+            a_des = -state.dq / dt  # never propagate a NaN: brake instead
+        v_lo, v_hi = self._velocity_bounds(state.q + state.dq * dt)
+        a_lo = np.maximum(-self.lim.acceleration, (v_lo - state.dq) / dt)
+        a_hi = np.minimum(self.lim.acceleration, (v_hi - state.dq) / dt)
+        j_step = self.lim.jerk * dt
+        a_lo = np.clip(a_lo, state.ddq - j_step, state.ddq + j_step)
+        a_hi = np.clip(a_hi, state.ddq - j_step, state.ddq + j_step)
+        a_hi = np.maximum(a_hi, a_lo)
+        a = np.clip(a_des, a_lo, a_hi)
+        if np.any(a != a_des):
+            self.clamped_ticks += 1
+        dq = state.dq + a * dt
+        return ReferenceState(state.q + dq * dt, dq, a)

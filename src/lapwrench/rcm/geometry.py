@@ -1,0 +1,75 @@
+"""RCM task geometry: initial point, error, Jacobian, closest point and its Jacobian.
+
+All quantities are in the base frame {B}; ``kin`` is the tick's :class:`Kinematics`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lapwrench.robot.model import Kinematics
+from lapwrench.spatial import Mat, Vec, skew
+
+
+def initial_rcm_point(kin: Kinematics, length: float, lambda0: float) -> Vec:
+    """Eq (18): p_R(t0) = p_E(θ0) + λ0 L d_z(θ0)."""
+    return kin.p_E + lambda0 * length * kin.d_z
+
+
+def rcm_error(kin: Kinematics, p_R: Vec) -> Vec:
+    """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
+    return kin.P @ (p_R - kin.p_E)
+
+
+def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
+    """Eq (28): J_R = ∂e_R/∂θ (3 x n), analytic.
+
+    With r = p_R - p_E and ḋ_z = ω x d_z = -[d_z]x J_Eω θ̇, differentiating eq (27) gives
+
+        J_R = ((d_zᵀ r) [d_z]x + d_z rᵀ [d_z]x) J_Eω - P J_Ev.
+
+    Its rows satisfy d_zᵀ ė_R = -ḋ_zᵀ e_R, so J_R has rank 2 when e_R = 0 (see
+    :func:`lateral_rcm_jacobian`).
+    """
+    d = kin.d_z
+    r = p_R - kin.p_E
+    Sd = skew(d)
+    J_w = kin.J_E[:3]
+    J_v = kin.J_E[3:]
+    return ((d @ r) * Sd + np.outer(d, r @ Sd)) @ J_w - kin.P @ J_v
+
+
+def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
+    """P J_R = (d_zᵀ r) [d_z]x J_Eω - P J_Ev: the RCM Jacobian restricted to the lateral plane.
+
+    e_R always lies in the plane orthogonal to d_z, so only two of its three rates are
+    independent. Eq (4) inverts J_R M⁻¹ J_Rᵀ, which is singular when e_R = 0 and nearly singular
+    near it (its third eigenvalue scales with |e_R|²). The lateral form has the exact null
+    direction d_z at every configuration, so its pseudo-inverse is exact and well conditioned.
+    """
+    d = kin.d_z
+    r = p_R - kin.p_E
+    return (d @ r) * skew(d) @ kin.J_E[:3] - kin.P @ kin.J_E[3:]
+
+
+def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
+    """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
+    return J_R @ kin.dq + kin.P @ rcm_velocity
+
+
+def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
+    """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
+    s = float(kin.d_z @ (p_R - kin.p_E)) / length
+    return min(1.0, max(0.0, s))
+
+
+def closest_point(kin: Kinematics, s_star: float, length: float) -> tuple[Vec, Vec]:
+    """Eqs (31)-(32): p_G = p_E + s* L d_z and its offset o_G = s* L d_z."""
+    o_G = s_star * length * kin.d_z
+    return kin.p_E + o_G, o_G
+
+
+def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
+    """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
+    J_w = kin.J_E[:3]
+    return np.vstack([J_w, kin.J_E[3:] - skew(o_G) @ J_w])

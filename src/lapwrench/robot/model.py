@@ -1,0 +1,115 @@
+"""Pinocchio model of the arm with its laparoscope, and the per-tick kinematics snapshot.
+
+:class:`Kinematics` is the "configuration" object every wrench source and task reads: one call to
+Pinocchio per tick fills it (mass matrix, nonlinear effects, frame poses and the end-effector
+Jacobian), so nothing downstream calls Pinocchio again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from lapwrench.robot.description import (
+    FRAME_C,
+    FRAME_E,
+    FRAME_H,
+    RobotKind,
+    ScopeGeometry,
+    build_urdf,
+)
+from lapwrench.robot.limits import JointLimits, franka_limits
+from lapwrench.spatial import Mat, Vec
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Robot state and derived quantities at one instant, all in the base frame {B}.
+
+    ``J_E`` is the geometric Jacobian of the {E} origin ordered ``[J_Ew; J_Ev]`` (eq 33).
+    ``d_z`` is the scope axis (eq 16) and ``P`` the projector orthogonal to it (eq 17).
+    """
+
+    q: Vec
+    dq: Vec
+    M: Mat
+    nle: Vec
+    gravity: Vec
+    p_E: Vec
+    R_E: Mat
+    J_E: Mat
+    p_H: Vec
+    R_H: Mat
+    p_C: Vec
+    R_C: Mat
+
+    @property
+    def d_z(self) -> Vec:
+        """Eq (16): d_z = R_E I_z, the laparoscope direction."""
+        return self.R_E[:, 2]
+
+    @property
+    def P(self) -> Mat:
+        """Eq (17): P = I3 - d_z d_z^T."""
+        d = self.d_z
+        return np.eye(3) - np.outer(d, d)
+
+    @property
+    def twist_E(self) -> Vec:
+        """[angular; linear] velocity of {E} (eq 33)."""
+        return self.J_E @ self.dq
+
+
+class RobotModel:
+    """The 7-DoF arm (fingers removed) with a laparoscope on the flange, in Pinocchio."""
+
+    def __init__(self, kind: RobotKind = "panda", scope: ScopeGeometry | None = None) -> None:
+        self.kind: RobotKind = kind
+        self.scope = scope or ScopeGeometry()
+        self.urdf = build_urdf(kind, self.scope)
+        self.model = pin.buildModelFromXML(self.urdf)
+        self.data = self.model.createData()
+        if self.model.nq != 7 or self.model.nv != 7:
+            raise ValueError(f"expected a 7-DoF arm, the {kind} description has nq={self.model.nq}")
+        self.nv = self.model.nv
+        self.frame_E = self.model.getFrameId(FRAME_E)
+        self.frame_H = self.model.getFrameId(FRAME_H)
+        self.frame_C = self.model.getFrameId(FRAME_C)
+        self.limits: JointLimits = franka_limits(kind, self.model)
+        self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+    @property
+    def length(self) -> float:
+        return self.scope.length
+
+    def kinematics(self, q: Vec, dq: Vec) -> Kinematics:
+        """Evaluate the model at (q, dq): one ``computeAllTerms`` and three frame placements."""
+        model, data = self.model, self.data
+        pin.computeAllTerms(model, data, q, dq)
+        M = np.triu(data.M) + np.triu(data.M, 1).T
+        oE = pin.updateFramePlacement(model, data, self.frame_E)
+        oH = pin.updateFramePlacement(model, data, self.frame_H)
+        oC = pin.updateFramePlacement(model, data, self.frame_C)
+        J = pin.getFrameJacobian(model, data, self.frame_E, self._lwa)
+        J_E = np.vstack([J[3:], J[:3]])
+        return Kinematics(
+            q=np.array(q, dtype=float),
+            dq=np.array(dq, dtype=float),
+            M=M,
+            nle=data.nle.copy(),
+            gravity=data.g.copy(),
+            p_E=oE.translation.copy(),
+            R_E=oE.rotation.copy(),
+            J_E=J_E,
+            p_H=oH.translation.copy(),
+            R_H=oH.rotation.copy(),
+            p_C=oC.translation.copy(),
+            R_C=oC.rotation.copy(),
+        )
+
+    def frame_pose(self, q: Vec, frame: str) -> pin.SE3:
+        """Pose of a named frame at q (convenience, not for the control tick)."""
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return self.data.oMf[self.model.getFrameId(frame)].copy()

@@ -1,0 +1,70 @@
+"""The virtual (instrument-tracking) wrench W_c from image points (eq 8-12)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from lapwrench.config import CameraConfig, TrackingConfig
+from lapwrench.shaping import sine_ramp
+from lapwrench.spatial import Mat, Vec, Wrench
+from lapwrench.wrenches.base import TickContext
+
+
+def pixel_distance(u: float, v: float, u0: float, v0: float) -> float:
+    """Eq (9): d_i = sqrt((u_i - u0)² + (v_i - v0)²)."""
+    return math.hypot(u - u0, v - v0)
+
+
+def tracking_force_magnitude(d: float, cfg: TrackingConfig) -> float:
+    """Eq (10): F_v(d_i), zero inside ε1, sine transition to F_max at ε2 (see :mod:`lapwrench.shaping`)."""
+    return sine_ramp(d, cfg.epsilon1, cfg.epsilon2, cfg.F_max, cfg.ramp)
+
+
+def unit_depth_ray(u: float, v: float, cam: CameraConfig, R_C: Mat) -> Vec:
+    """Eq (11): P'_i = (u_i - u0)/f_x x_C + (v_i - v0)/f_y y_C + z_C, in {B}."""
+    return R_C @ np.array([(u - cam.u0) / cam.fx, (v - cam.v0) / cam.fy, 1.0])
+
+
+def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
+    """Eq (12): V_i = ((z_C x P'_i) x P'_i) / ‖·‖.
+
+    As printed, V_i is perpendicular to the ray P'_i (in the plane of z_C and P'_i): its
+    image-plane part points toward the instrument and it carries a small component along -z_C
+    (a retraction that widens the view). The text says "projecting onto the image plane";
+    ``variant="image_plane"`` gives that reading, P'_i minus its z_C part, normalised.
+    Returns zeros when the ray is along z_C (the instrument sits on the principal point).
+    """
+    if variant == "image_plane":
+        w = ray - (ray @ z_C) * z_C
+    else:
+        w = np.cross(np.cross(z_C, ray), ray)
+    n = np.linalg.norm(w)
+    return w / n if n > 1e-12 else np.zeros(3)
+
+
+def virtual_force(points: Vec, cam: CameraConfig, cfg: TrackingConfig, R_C: Mat) -> Vec:
+    """Eq (8), force part: F_c = Σ F_v(d_i) V_i over the n_s detected instruments (0 if n_s = 0)."""
+    F = np.zeros(3)
+    for u, v in points:
+        mag = tracking_force_magnitude(pixel_distance(u, v, cam.u0, cam.v0), cfg)
+        if mag > 0.0:
+            F += mag * tracking_direction(unit_depth_ray(u, v, cam, R_C), R_C[:, 2], cfg.direction)
+    return F
+
+
+class TrackingWrench:
+    """W_c = [0; F_c] about the camera point p_C (eq 8)."""
+
+    name = "tracking"
+
+    def __init__(self, camera: CameraConfig, cfg: TrackingConfig) -> None:
+        self.camera = camera
+        self.cfg = cfg
+
+    def compute(self, ctx: TickContext) -> Wrench:
+        obs = ctx.inputs.instruments
+        if obs is None or len(obs.points) == 0:
+            return Wrench.zero(ctx.kin.p_C)
+        return Wrench(np.zeros(3), virtual_force(obs.points, self.camera, self.cfg, ctx.kin.R_C), ctx.kin.p_C)
