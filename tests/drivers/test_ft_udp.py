@@ -1,0 +1,276 @@
+"""F/T drivers (OnRobot HEX via compute box, ATI Net F/T RDT) against a loopback UDP peer."""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from lapwrench.drivers.base import DeviceTimeoutError, PacketError
+from lapwrench.drivers.fakes import FakeFTDevice
+from lapwrench.drivers.ft import (
+    CMD_BIAS,
+    CMD_SET_FILTER,
+    CMD_SET_SPEED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    RECORD_SIZE,
+    AtiNetFTSensor,
+    OnRobotHexSensor,
+    pack_record,
+    pack_request,
+    unpack_record,
+    unpack_request,
+)
+
+RATE = 400.0  # modest, for 2 slow CI cores
+
+
+def wait_until(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.005) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()
+
+
+@pytest.fixture
+def device() -> Iterator[FakeFTDevice]:
+    dev = FakeFTDevice(rate_hz=RATE).start()
+    try:
+        yield dev
+    finally:
+        dev.close()
+
+
+# --------------------------------------------------------------------------- codec
+def test_request_and_record_codec_roundtrip() -> None:
+    req = pack_request(CMD_START_REALTIME, 0x01020304)
+    assert req == bytes.fromhex("1234 0002 01020304")
+    assert unpack_request(req) == (0x1234, CMD_START_REALTIME, 0x01020304)
+    rec = pack_record(7, 99, 0, [1, -2, 3, -4, 5, -6])
+    assert len(rec) == RECORD_SIZE == 36
+    r = unpack_record(rec)
+    assert (r.sequence, r.ft_sequence, r.status, r.counts) == (7, 99, 0, (1, -2, 3, -4, 5, -6))
+
+
+@pytest.mark.parametrize(
+    "data",
+    [b"", b"\x00" * 35, b"\x00" * 37, pack_request(CMD_START_REALTIME)],
+    ids=["empty", "short", "long", "request-header"],
+)
+def test_unpack_record_rejects_malformed(data: bytes) -> None:
+    with pytest.raises(PacketError):
+        unpack_record(data)
+
+
+def test_unpack_request_rejects_wrong_header() -> None:
+    with pytest.raises(PacketError, match="header"):
+        unpack_request(pack_request(CMD_STOP, header=0x4321))
+
+
+# --------------------------------------------------------------------------- HEX
+def test_hex_scaling_defaults(device: FakeFTDevice) -> None:
+    device.counts = np.array([10000, -20000, 5000, 100000, -250000, 0])
+    with OnRobotHexSensor(*device.address) as s:
+        s0 = s.latest()
+        assert s0 is not None
+        w = s.buffer.wait_newer(s0.seq + 2, timeout=2.0).value
+        np.testing.assert_allclose(w.force, [1.0, -2.0, 0.5])
+        np.testing.assert_allclose(w.torque, [1.0, -2.5, 0.0])
+        assert w.force.shape == (3,) and w.torque.shape == (3,)
+        assert not w.force.flags.writeable
+        np.testing.assert_allclose(w.as_array(), [1.0, -2.0, 0.5, 1.0, -2.5, 0.0])
+    assert (CMD_START_REALTIME, 0) in device.commands
+
+
+def test_hex_configurable_scaling_and_device_commands(device: FakeFTDevice) -> None:
+    device.counts = np.array([500, 0, 0, 0, 0, 2000])
+    with OnRobotHexSensor(
+        *device.address, counts_per_force=100, counts_per_torque=1000, rate_hz=500, filter_code=4
+    ) as s:
+        w = s.buffer.wait_newer(s.latest().seq, timeout=2.0).value
+        np.testing.assert_allclose(w.force, [5.0, 0, 0])
+        np.testing.assert_allclose(w.torque, [0, 0, 2.0])
+        s.set_hardware_bias(True)
+        assert wait_until(lambda: (CMD_BIAS, 0xFF) in device.commands)
+    # speed word = 1000 / rate_hz, filter code, then start (order as the public drivers)
+    cmds = [c for c, _ in device.commands]
+    assert cmds.index(CMD_SET_SPEED) < cmds.index(CMD_SET_FILTER) < cmds.index(CMD_START_REALTIME)
+    assert (CMD_SET_SPEED, 2) in device.commands
+    assert (CMD_SET_FILTER, 4) in device.commands
+
+
+def test_hex_tare_removes_offset(device: FakeFTDevice) -> None:
+    offset = np.array([12000, -3000, 40000, 5000, 0, -7000])
+    device.counts = offset
+    with OnRobotHexSensor(*device.address) as s:
+        bias = s.tare(n_samples=20, timeout=2.0)
+        np.testing.assert_allclose(bias, offset / [1e4, 1e4, 1e4, 1e5, 1e5, 1e5])
+        w = s.buffer.wait_newer(s.latest().seq, timeout=2.0).value
+        np.testing.assert_allclose(w.as_array(), 0.0, atol=1e-12)
+        device.counts = offset + np.array([10000, 0, 0, 0, 0, 100000])  # surgeon pushes 1 N, 1 Nm
+        assert wait_until(lambda: abs(s.latest().value.force[0] - 1.0) < 1e-9)
+        np.testing.assert_allclose(s.latest().value.torque, [0, 0, 1.0], atol=1e-12)
+        s.clear_bias()
+        assert wait_until(lambda: abs(s.latest().value.force[0] - 2.2) < 1e-9)
+
+
+def test_tare_averages_noisy_samples(device: FakeFTDevice) -> None:
+    # alternate +-1000 counts around 5000: mean of an even number of samples is exact
+    device.counts_fn = lambda i: [5000 + (1000 if i % 2 else -1000), 0, 0, 0, 0, 0]
+    with OnRobotHexSensor(*device.address) as s:
+        bias = s.tare(n_samples=40, timeout=2.0)
+        assert bias[0] == pytest.approx(0.5, abs=0.1 / 40 + 1e-9)
+
+
+def test_tare_requires_running_source(device: FakeFTDevice) -> None:
+    s = OnRobotHexSensor(*device.address)
+    with pytest.raises(RuntimeError, match="running"):
+        s.tare()
+
+
+def test_malformed_packets_are_counted_and_thread_survives(device: FakeFTDevice) -> None:
+    device.counts = np.array([10000, 0, 0, 0, 0, 0])
+    with OnRobotHexSensor(*device.address) as s:
+        device.inject([b"\x01\x02\x03", b"\x00" * 40, pack_request(CMD_START_REALTIME), b""])
+        assert wait_until(lambda: s.status().malformed >= 4)
+        st = s.status()
+        assert st.running
+        assert "malformed" in (st.last_error or "")
+        before = s.latest().seq
+        assert s.buffer.wait_newer(before + 5, timeout=2.0) is not None  # data keeps flowing
+        assert s.status().malformed == 4
+
+
+def test_status_word_rejects_records(device: FakeFTDevice) -> None:
+    with OnRobotHexSensor(*device.address) as s:
+        device.status = 0x80000001
+        assert wait_until(lambda: s.status().malformed >= 3)
+        assert s.last_status == 0x80000001
+        seq = s.latest().seq
+        time.sleep(0.05)
+        assert s.latest().seq == seq  # nothing published while the device reports an error
+        device.status = 0
+        assert s.buffer.wait_newer(seq, timeout=2.0) is not None
+
+
+def test_rate_monitor_drops_and_out_of_order(device: FakeFTDevice) -> None:
+    with OnRobotHexSensor(*device.address, expected_rate_hz=RATE) as s:
+        time.sleep(0.3)
+        st = s.status()
+        assert st.rate_hz == pytest.approx(RATE, rel=0.35)
+        assert st.drops == 0
+        device.skip(5)
+        device.duplicate(2)
+        assert wait_until(lambda: s.status().drops >= 5 and s.status().out_of_order >= 2)
+        st = s.status()
+        assert st.drops == 5
+        assert st.out_of_order == 2
+
+
+def test_staleness_when_peer_goes_silent(device: FakeFTDevice) -> None:
+    with OnRobotHexSensor(*device.address) as s:
+        assert s.fresh(0.1)
+        device.pause()
+        time.sleep(0.02)
+        age0 = s.buffer.age()
+        time.sleep(0.15)
+        assert s.buffer.age() > age0 + 0.1  # age grows
+        assert not s.fresh(0.1)
+        assert wait_until(lambda: s.rate.rate() == 0.0 or s.status().rate_hz < RATE / 2, timeout=2.0)
+        device.resume()
+        assert wait_until(lambda: s.fresh(0.05))
+
+
+def test_stop_cleans_up_thread_and_socket(device: FakeFTDevice) -> None:
+    baseline = threading.active_count()
+    s = OnRobotHexSensor(*device.address).start()
+    thread = s._thread
+    assert thread is not None and thread.is_alive()
+    assert threading.active_count() == baseline + 1
+    t0 = time.monotonic()
+    s.stop()
+    assert time.monotonic() - t0 < 1.0
+    assert not thread.is_alive()
+    assert not s.running
+    assert s._sock is None
+    assert threading.active_count() == baseline
+    assert wait_until(lambda: (CMD_STOP, 0) in device.commands)
+    assert wait_until(lambda: not device.streaming)
+    s.stop()  # idempotent
+    # restartable
+    with s:
+        assert s.buffer.wait_newer(s.latest().seq, timeout=2.0) is not None
+
+
+def test_no_device_gives_clear_timeout_error() -> None:
+    # a bound but silent UDP port: requests vanish, nothing answers
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    port = silent.getsockname()[1]
+    baseline = threading.active_count()
+    try:
+        s = OnRobotHexSensor("127.0.0.1", port, start_timeout=0.3)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeoutError, match=rf"OnRobot HEX sensor at udp://127.0.0.1:{port}"):
+            s.start()
+        assert time.monotonic() - t0 < 2.0
+        assert not s.running
+        assert threading.active_count() == baseline
+    finally:
+        silent.close()
+
+
+def test_closed_port_gives_clear_error() -> None:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()  # nothing listens: the kernel answers with ICMP port unreachable
+    s = AtiNetFTSensor("127.0.0.1", port, start_timeout=0.3)
+    with pytest.raises(DeviceTimeoutError, match="ATI Net F/T") as info:
+        s.start()
+    assert str(port) in str(info.value)
+    assert not s.running
+
+
+# --------------------------------------------------------------------------- ATI Net F/T
+def test_netft_default_scaling_and_rdt_commands(device: FakeFTDevice) -> None:
+    device.counts = np.array([1_000_000, 2_500_000, -500_000, 1_000_000, 0, -3_000_000])
+    with AtiNetFTSensor(*device.address) as s:
+        w = s.buffer.wait_newer(s.latest().seq, timeout=2.0).value
+        np.testing.assert_allclose(w.force, [1.0, 2.5, -0.5])
+        np.testing.assert_allclose(w.torque, [1.0, 0.0, -3.0])
+        s.set_hardware_bias()
+        assert wait_until(lambda: (CMD_BIAS, 0) in device.commands)
+    assert device.commands[0] == (CMD_START_REALTIME, 0)
+    assert device.bad_requests == 0
+
+
+def test_netft_custom_counts_tare_and_malformed(device: FakeFTDevice) -> None:
+    device.counts = np.array([3000, 0, 0, 0, 0, 0])
+    with AtiNetFTSensor(*device.address, counts_per_force=1000, counts_per_torque=1e6) as s:
+        assert s.buffer.wait_newer(s.latest().seq, timeout=2.0).value.force[0] == pytest.approx(3.0)
+        s.tare(10)
+        device.inject([b"\x12\x34" + b"\x00" * 6, b"\xff" * 36 + b"x"])
+        device.counts = np.array([4000, 0, 0, 0, 0, 0])
+        assert wait_until(lambda: abs(s.latest().value.force[0] - 1.0) < 1e-9)
+        assert wait_until(lambda: s.status().malformed == 2)
+        assert s.running
+
+
+def test_constructor_validation() -> None:
+    with pytest.raises(ValueError):
+        AtiNetFTSensor("127.0.0.1", 1, counts_per_force=0)
+    with pytest.raises(ValueError):
+        OnRobotHexSensor("127.0.0.1", 1, filter_code=9)
+    with pytest.raises(ValueError):
+        OnRobotHexSensor("127.0.0.1", 1, rate_hz=5000)
+    s = OnRobotHexSensor("127.0.0.1", 1)
+    with pytest.raises(ValueError):
+        s.set_bias([np.nan, 0, 0, 0, 0, 0])
