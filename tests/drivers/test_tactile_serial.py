@@ -102,9 +102,7 @@ def test_format_validation() -> None:
 def test_parser_handles_split_reads_and_garbage(checksum: ChecksumType) -> None:
     fmt = TactileFrameFormat(checksum=checksum)
     frames = [fmt.encode(pattern(k)) for k in range(5)]
-    stream = (
-        b"\x00\x13garbage\xaa" + frames[0] + frames[1] + b"\x55\xaa\x01" + frames[2] + frames[3] + frames[4]
-    )
+    stream = b"\x00\x13garbage\xaa" + frames[0] + frames[1] + b"\x55\xaa\x01" + frames[2] + frames[3] + frames[4]
     p = TactileFrameParser(fmt)
     out = []
     for i in range(0, len(stream), 7):  # arbitrary read boundaries

@@ -140,6 +140,7 @@ class StreamingSource(ABC, Generic[T]):
         self._stop_event = threading.Event()
         self._thread: threading.Thread | None = None
         self._opened = False
+        self._close_deferred = False
         self._finished = False
         self._counter_lock = threading.Lock()
         self._malformed = 0
@@ -180,6 +181,7 @@ class StreamingSource(ABC, Generic[T]):
             raise RuntimeError(f"{self.name}: already started")
         self._stop_event.clear()
         self._finished = False
+        self._close_deferred = False
         self._open()
         self._opened = True
         self._thread = threading.Thread(target=self._run, name=f"lapwrench-{self.name}", daemon=True)
@@ -203,9 +205,18 @@ class StreamingSource(ABC, Generic[T]):
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout)
             if thread.is_alive():
-                log.warning("%s: reader thread did not stop within %.1f s", self.name, timeout)
-        if self._opened:
-            self._opened = False
+                # Never release a device under a read in progress: the thread closes it on exit.
+                log.warning("%s: reader thread did not stop within %.1f s; close deferred", self.name, timeout)
+                self._close_deferred = True
+                if thread.is_alive():
+                    return
+                # the thread ended meanwhile and may have missed the flag: close here (idempotent)
+        self._close_once()
+
+    def _close_once(self) -> None:
+        with self._counter_lock:
+            opened, self._opened = self._opened, False
+        if opened:
             try:
                 self._close()
             except Exception as exc:
@@ -284,6 +295,13 @@ class StreamingSource(ABC, Generic[T]):
             log.warning("%s: %s (total %d)", self.name, msg, n)
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        finally:
+            if self._close_deferred:
+                self._close_once()
+
+    def _loop(self) -> None:
         while not self._stop_event.is_set():
             try:
                 self._read_once()

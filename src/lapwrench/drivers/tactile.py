@@ -173,17 +173,11 @@ class TactileFrameFormat:
             pos += 1
         payload = f[pos : pos + self.payload_size]
         if self.checksum is not ChecksumType.NONE:
-            covered = (
-                f[: pos + self.payload_size]
-                if self.checksum_includes_header
-                else f[h : pos + self.payload_size]
-            )
+            covered = f[: pos + self.payload_size] if self.checksum_includes_header else f[h : pos + self.payload_size]
             got = f[pos + self.payload_size :]
             want = self.compute_checksum(covered)
             if got != want:
-                raise PacketError(
-                    f"{self.checksum.value} checksum mismatch: got {got.hex()}, want {want.hex()}"
-                )
+                raise PacketError(f"{self.checksum.value} checksum mismatch: got {got.hex()}, want {want.hex()}")
         values = np.frombuffer(payload, dtype=self.dtype).astype(self.dtype.newbyteorder("="))
         if self.element_width > 1 and int(values.max()) > self.max_value:
             raise PacketError(f"element value {int(values.max())} > max_value {self.max_value}")
