@@ -166,7 +166,8 @@ class Controller:
         # 7. limits → command
         self.ref = self.shaper.step(self.ref, dq_next)
 
-        wrenches = {"rcm": W_r.vector, **{s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)}}
+        wrenches = {"rcm": W_r.vector}
+        wrenches.update({s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)})
         F_h = float(np.linalg.norm(wrenches["interaction"][3:]))
         F_c = float(np.linalg.norm(wrenches["tracking"][3:]))
         if np.linalg.norm(geo.e_R) > self.cfg.inputs.max_rcm_error:
@@ -199,10 +200,8 @@ class Controller:
     def _geometry(self, kin: Kinematics) -> TaskGeometry:
         assert self.rcm is not None
         p_R, L = self.rcm.p_R, self.cfg.scope.length
-        if self.cfg.motion.rcm_task == "lateral":
-            J_R = lateral_rcm_jacobian(kin, p_R)
-        else:
-            J_R = rcm_jacobian(kin, p_R)
+        lateral = self.cfg.motion.rcm_task == "lateral"
+        J_R = lateral_rcm_jacobian(kin, p_R) if lateral else rcm_jacobian(kin, p_R)
         s_star = closest_point_parameter(kin, p_R, L)
         p_G, o_G = closest_point(kin, s_star, L)
         return TaskGeometry(

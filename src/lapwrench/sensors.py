@@ -130,7 +130,7 @@ class InputValidator:
             elif not (np.all(np.isfinite(f)) and np.all(np.isfinite(m))):
                 reject("ft", "F/T reading is not finite")
             elif np.linalg.norm(f) > self.interaction.force_range or np.linalg.norm(m) > self.interaction.torque_range:
-                reject("ft", f"F/T reading out of range (|F|={np.linalg.norm(f):.1f} N, |M|={np.linalg.norm(m):.2f} N m)")
+                reject("ft", f"F/T out of range (|F|={np.linalg.norm(f):.1f} N, |M|={np.linalg.norm(m):.2f} N m)")
             else:
                 out.ft = ForceTorqueReading(f, m, frame.ft.stamp)
 

@@ -6,11 +6,12 @@ allowed by
 
 1. the jerk limit around the previous acceleration,
 2. the acceleration limit,
-3. the velocity limit,
+3. the velocity limit, keeping room to ramp the acceleration back to zero at the jerk limit,
 4. the position limits: the velocity toward a limit must let the joint stop before it with a
    braking deceleration (half the acceleration limit, leaving room for the jerk ramp),
 
-with the jerk band taking precedence when the bands do not intersect. Limits are the robot's
+with precedence jerk > acceleration > velocity/position when the bands do not intersect (the
+position margin absorbs the rare overshoot). Limits are the robot's
 scaled by ``limit_fraction``; positions keep ``position_margin`` clear of the hard limits.
 """
 
@@ -47,6 +48,13 @@ class ReferenceShaper:
         v_lo = -np.minimum(self.lim.velocity, np.sqrt(2.0 * self.a_brake * room_lo))
         return v_lo, v_hi
 
+    def _reachable_acceleration(self, headroom: Vec) -> Vec:
+        """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
+        jerk-limited ramp of the acceleration back to zero. Negative headroom brakes at once."""
+        dt, j = self.dt, self.lim.jerk
+        a = j * (np.sqrt(dt * dt + 2.0 * np.maximum(headroom, 0.0) / j) - dt)
+        return np.where(headroom >= 0.0, a, headroom / dt)
+
     def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
         """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` that respects every limit."""
         dt = self.dt
@@ -54,8 +62,9 @@ class ReferenceShaper:
         if not np.all(np.isfinite(a_des)):
             a_des = -state.dq / dt  # never propagate a NaN: brake instead
         v_lo, v_hi = self._velocity_bounds(state.q + state.dq * dt)
-        a_lo = np.maximum(-self.lim.acceleration, (v_lo - state.dq) / dt)
-        a_hi = np.minimum(self.lim.acceleration, (v_hi - state.dq) / dt)
+        a_max = self.lim.acceleration
+        a_lo = np.clip(-self._reachable_acceleration(state.dq - v_lo), -a_max, a_max)
+        a_hi = np.clip(self._reachable_acceleration(v_hi - state.dq), -a_max, a_max)
         j_step = self.lim.jerk * dt
         a_lo = np.clip(a_lo, state.ddq - j_step, state.ddq + j_step)
         a_hi = np.clip(a_hi, state.ddq - j_step, state.ddq + j_step)

@@ -74,3 +74,25 @@ def franka_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
         t["torque"],
         t["torque_rate"],
     )
+
+
+def limit_usage(q_ref: np.ndarray, dt: float, limits: JointLimits, q_start: Vec | None = None) -> dict[str, float]:
+    """Largest fraction of each limit used by a reference sequence (T x 7), as libfranka sees it.
+
+    Velocity, acceleration and jerk are the backward differences of the commanded positions,
+    starting from rest at ``q_start`` (default: the first reference). A value <= 1 means inside.
+    """
+    q = np.asarray(q_ref, dtype=float)
+    start = q[:1] if q_start is None else np.asarray(q_start, dtype=float)[None]
+    q = np.vstack([start, start, start, q])
+    v = np.diff(q, axis=0) / dt
+    a = np.diff(v, axis=0) / dt
+    j = np.diff(a, axis=0) / dt
+    below = np.max((limits.position_lower - q) / np.maximum(limits.position_upper - limits.position_lower, 1e-9))
+    above = np.max((q - limits.position_upper) / np.maximum(limits.position_upper - limits.position_lower, 1e-9))
+    return {
+        "position_excess": float(max(below, above, 0.0)),
+        "velocity": float(np.max(np.abs(v) / limits.velocity)),
+        "acceleration": float(np.max(np.abs(a) / limits.acceleration)),
+        "jerk": float(np.max(np.abs(j) / limits.jerk)),
+    }

@@ -36,10 +36,7 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
     ``variant="image_plane"`` gives that reading, P'_i minus its z_C part, normalised.
     Returns zeros when the ray is along z_C (the instrument sits on the principal point).
     """
-    if variant == "image_plane":
-        w = ray - (ray @ z_C) * z_C
-    else:
-        w = np.cross(np.cross(z_C, ray), ray)
+    w = ray - ray @ z_C * z_C if variant == "image_plane" else np.cross(np.cross(z_C, ray), ray)
     n = np.linalg.norm(w)
     return w / n if n > 1e-12 else np.zeros(3)
 

@@ -1,0 +1,155 @@
+"""Closed-loop runs of the controller on its own virtual dynamics (no physics engine).
+
+The arm is the controller's virtual model itself: joint references are taken as the robot's
+state. A scripted hand wrench acts on the handle and instruments are 3-D points projected
+through the pinhole camera at the scope tip. Used by the tests and by ``lapwrench virtual``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lapwrench.config import CameraConfig, Config
+from lapwrench.controller import Controller, TickResult
+from lapwrench.robot.limits import limit_usage
+from lapwrench.sensors import (
+    ForceTorqueReading,
+    InstrumentObservation,
+    SensorFrame,
+    TactileReading,
+)
+from lapwrench.spatial import Mat, Vec
+
+# Scope pointing straight down, arm comfortably inside its limits (Panda and FR3).
+DEFAULT_Q0 = np.array([0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785])
+
+
+def project_points(points: Vec, p_C: Vec, R_C: Mat, cam: CameraConfig) -> tuple[Vec, np.ndarray]:
+    """Pinhole projection of world points (n x 3) into the camera {C}; returns (uv, visible)."""
+    pc = (np.atleast_2d(points) - p_C) @ R_C
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = cam.u0 + cam.fx * pc[:, 0] / z
+        v = cam.v0 + cam.fy * pc[:, 1] / z
+    visible = (z > 1e-3) & (u >= 0) & (u <= cam.width) & (v >= 0) & (v <= cam.height)
+    return np.stack([u, v], axis=1), visible
+
+
+def tactile_for_delta(delta: float, k_H: float, elements: int = 32) -> Vec:
+    """A grip pattern whose eq (7) gain is ``delta``: ``elements`` equal non-zero values."""
+    values = np.zeros(64)
+    if delta > 0:
+        values[:elements] = min(255.0, delta * k_H / elements)
+    return values
+
+
+@dataclass
+class HandScript:
+    """Hand force (in {H}) and grip gain as functions of time."""
+
+    force: Callable[[float], Vec] = lambda t: np.zeros(3)
+    torque: Callable[[float], Vec] = lambda t: np.zeros(3)
+    delta: Callable[[float], float] = lambda t: 0.0
+
+
+@dataclass
+class VirtualLog:
+    t: list[float] = field(default_factory=list)
+    results: list[TickResult] = field(default_factory=list)
+    pixels: list[Vec] = field(default_factory=list)
+    axis_points: list[tuple[Vec, Vec]] = field(default_factory=list)
+
+    def array(self, name: str) -> np.ndarray:
+        return np.array([getattr(r, name) for r in self.results])
+
+
+def run_virtual(
+    cfg: Config,
+    duration: float,
+    hand: HandScript | None = None,
+    instruments: Callable[[float], Vec] | None = None,
+    q0: Vec = DEFAULT_Q0,
+    p_R: Vec | None = None,
+    controller: Controller | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[Controller, VirtualLog]:
+    """Run the controller in closed loop on its virtual model for ``duration`` seconds."""
+    ctrl = controller or Controller(cfg)
+    ctrl.reset(q0, p_R)
+    hand = hand or HandScript()
+    log = VirtualLog()
+    dt = cfg.robot.dt
+    steps = round(duration / dt)
+    kin = ctrl.model.kinematics(ctrl.ref.q, ctrl.ref.dq)  # type: ignore[union-attr]
+    for k in range(steps):
+        t = k * dt
+        ft = ForceTorqueReading(hand.force(t), hand.torque(t), t)
+        tactile = TactileReading(tactile_for_delta(hand.delta(t), cfg.interaction.k_H), t)
+        obs = None
+        uv = np.zeros((0, 2))
+        if instruments is not None:
+            uv, vis = project_points(instruments(t), kin.p_C, kin.R_C, cfg.camera)
+            uv = uv[vis]
+            obs = InstrumentObservation(uv, t)
+        res = ctrl.tick(SensorFrame(t, ft, tactile, obs))
+        kin = ctrl.model.kinematics(res.q_ref, res.dq_ref)
+        log.t.append(t)
+        log.results.append(res)
+        log.pixels.append(uv)
+        log.axis_points.append((kin.p_E.copy(), kin.p_E + cfg.scope.length * kin.d_z))
+        if progress is not None:
+            progress(k, steps)
+    return ctrl, log
+
+
+def limits_report(ctrl: Controller, log: VirtualLog, q0: Vec) -> dict[str, float]:
+    q = np.array([r.q_ref for r in log.results])
+    return limit_usage(q, ctrl.dt, ctrl.model.limits, q0)
+
+
+def plot_virtual(log: VirtualLog, cfg: Config, path: Path, title: str = "virtual closed loop") -> None:
+    """RCM error, wrenches, grip gain, pixel distance and mode over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.array(log.t)
+    e = np.array([r.rcm_error for r in log.results]) * 1e3
+    Fh = np.array([np.linalg.norm(r.wrenches["interaction"][3:]) for r in log.results])
+    Fc = np.array([np.linalg.norm(r.wrenches["tracking"][3:]) for r in log.results])
+    delta = np.array([r.delta for r in log.results])
+    d = np.array(
+        [
+            np.min(np.hypot(p[:, 0] - cfg.camera.u0, p[:, 1] - cfg.camera.v0)) if len(p) else np.nan
+            for p in log.pixels
+        ]
+    )
+    modes = ["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
+    m = np.array([modes.index(r.mode) for r in log.results])
+    fig, ax = plt.subplots(5, 1, figsize=(9, 11), sharex=True)
+    ax[0].plot(t, e)
+    ax[0].set_ylabel("RCM error |e_R| (mm)")
+    ax[1].plot(t, Fh, label="|F_h| (handle)")
+    ax[1].plot(t, Fc, label="|F_c| (tracking)")
+    ax[1].set_ylabel("force (N)")
+    ax[1].legend(loc="upper right")
+    ax[2].plot(t, delta)
+    ax[2].set_ylabel("grip gain δ")
+    ax[3].plot(t, d)
+    ax[3].axhline(cfg.tracking.epsilon1, ls="--", c="g", label="ε1")
+    ax[3].axhline(cfg.tracking.epsilon2, ls="--", c="r", label="ε2")
+    ax[3].set_ylabel("instrument distance (px)")
+    ax[3].legend(loc="upper right")
+    ax[4].step(t, m, where="post")
+    ax[4].set_yticks(range(len(modes)), modes)
+    ax[4].set_xlabel("time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

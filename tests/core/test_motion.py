@@ -1,0 +1,87 @@
+"""The virtual model's integration and the reference shaper."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lapwrench.config import load
+from lapwrench.controller import Controller
+from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
+from lapwrench.motion.virtual_model import self_motion_damping
+from lapwrench.robot.limits import franka_limits, limit_usage
+from lapwrench.robot.model import RobotModel
+from lapwrench.virtual import DEFAULT_Q0
+
+
+@pytest.mark.parametrize("kind", ["panda", "fr3"])
+def test_shaper_keeps_wild_requests_inside_every_limit(kind: str) -> None:
+    model = RobotModel(kind)
+    shaper = ReferenceShaper(model.limits, 1e-3, 0.9, 0.05)
+    rng = np.random.default_rng(0)
+    state = ReferenceState(DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7))
+    qs = []
+    for k in range(4000):
+        wish = rng.choice([-1e3, 1e3], size=7) if (k // 400) % 2 else 50.0 * rng.standard_normal(7)
+        if k == 1234:
+            wish[2] = np.nan
+        state = shaper.step(state, wish)
+        qs.append(state.q)
+    usage = limit_usage(np.array(qs), 1e-3, model.limits, DEFAULT_Q0)
+    assert usage["position_excess"] == 0.0
+    assert usage["velocity"] <= 0.9 + 1e-9
+    assert usage["acceleration"] <= 0.9 + 1e-9
+    assert usage["jerk"] <= 0.9 + 1e-9
+    assert np.all(np.isfinite(qs))
+
+
+def test_shaper_stops_before_the_position_limit() -> None:
+    lim = franka_limits("panda")
+    shaper = ReferenceShaper(lim, 1e-3, 0.9, 0.05)
+    state = ReferenceState(DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7))
+    for _ in range(5000):
+        state = shaper.step(state, np.full(7, 10.0))
+    assert np.all(state.q <= lim.position_upper - 0.05 + 1e-4)  # overshoot into the margin is tiny
+    assert np.max(np.abs(state.dq)) < 0.05
+
+
+def test_shaper_passes_feasible_requests_unchanged() -> None:
+    shaper = ReferenceShaper(franka_limits("panda"), 1e-3, 0.9, 0.05)
+    state = ReferenceState(DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7))
+    nxt = shaper.step(state, np.full(7, 1e-3))
+    np.testing.assert_allclose(nxt.dq, 1e-3)
+    np.testing.assert_allclose(nxt.q, DEFAULT_Q0 + 1e-6)
+
+
+def _damped_step_matrices(ctrl: Controller):
+    """Velocity-update matrices of the damping terms alone, explicit and semi-implicit."""
+    kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
+    geo = ctrl._geometry(kin)
+    from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
+
+    Minv = np.linalg.inv(kin.M)
+    N_r = nullspace_projector(geo.J_R, weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z))
+    B = ctrl._damping(geo, N_r) + self_motion_damping(kin, Minv, 10.0)
+    dt = ctrl.dt
+    explicit = np.eye(7) - dt * Minv @ B
+    implicit = np.linalg.solve(kin.M + dt * B, kin.M)
+    return explicit, implicit
+
+
+def test_explicit_euler_is_unstable_with_the_paper_damping_and_semi_implicit_is_not() -> None:
+    ctrl = Controller(load())
+    ctrl.reset(DEFAULT_Q0)
+    explicit, implicit = _damped_step_matrices(ctrl)
+    assert np.max(np.abs(np.linalg.eigvals(explicit))) > 1.0
+    assert np.max(np.abs(np.linalg.eigvals(implicit))) <= 1.0 + 1e-9
+
+
+def test_self_motion_damping_does_not_move_the_end_effector() -> None:
+    model = RobotModel("panda")
+    rng = np.random.default_rng(0)
+    kin = model.kinematics(DEFAULT_Q0, rng.standard_normal(7))
+    Minv = np.linalg.inv(kin.M)
+    B = self_motion_damping(kin, Minv, 10.0)
+    acc_E = kin.J_E @ Minv @ B @ kin.dq
+    assert np.linalg.norm(acc_E) < 1e-6 * np.linalg.norm(kin.J_E) * np.linalg.norm(Minv @ B @ kin.dq)
+    assert kin.dq @ B @ kin.dq >= 0.0
