@@ -1,0 +1,88 @@
+"""Instrument perception: detectors (ONNX YOLO, ultralytics, classical OpenCV) and camera calibration.
+
+The paper tracks instruments with a YOLOv7 detector (Sec. II-A, IV); each detection's image point
+``(u_i, v_i)`` feeds the instrument-tracking wrench (eq 8-12). Every backend implements the
+:class:`Detector` protocol: ``detect(image) -> list[Detection]``. Build one with
+:func:`make_detector` (``"classical"``, a ``.onnx`` file or a ``.pt`` file).
+
+The ultralytics backend and the ONNX test-model builders import their optional packages lazily.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from lapwrench.perception.boxes import Letterbox, letterbox, nms
+from lapwrench.perception.calibration import (
+    CalibrationError,
+    CalibrationResult,
+    calibrate_from_images,
+    read_intrinsics_yaml,
+    write_intrinsics_yaml,
+)
+from lapwrench.perception.classical import ClassicalDetector, ClassicalParams
+from lapwrench.perception.detection import (
+    BackendUnavailableError,
+    Detection,
+    Detector,
+    DetectorConfig,
+    FrameError,
+    ModelError,
+    PerceptionError,
+    TrackingPoint,
+    TrackingPointRule,
+    validate_frame,
+)
+from lapwrench.perception.onnx_yolo import OnnxYoloDetector, OutputLayout, infer_layout
+from lapwrench.perception.ultralytics_backend import UltralyticsDetector
+
+__all__ = [
+    "BackendUnavailableError",
+    "CalibrationError",
+    "CalibrationResult",
+    "ClassicalDetector",
+    "ClassicalParams",
+    "Detection",
+    "Detector",
+    "DetectorConfig",
+    "FrameError",
+    "Letterbox",
+    "ModelError",
+    "OnnxYoloDetector",
+    "OutputLayout",
+    "PerceptionError",
+    "TrackingPoint",
+    "TrackingPointRule",
+    "UltralyticsDetector",
+    "calibrate_from_images",
+    "infer_layout",
+    "letterbox",
+    "make_detector",
+    "nms",
+    "read_intrinsics_yaml",
+    "validate_frame",
+    "write_intrinsics_yaml",
+]
+
+
+def make_detector(spec: str | os.PathLike[str], config: DetectorConfig | None = None, **kwargs: Any) -> Detector:
+    """Build a detector from a spec: ``"classical"``, a ``.onnx`` model or ``.pt`` ultralytics weights.
+
+    Extra keyword arguments go to the backend's constructor.
+
+    Raises:
+        ModelError: the spec is neither ``"classical"`` nor a ``.onnx``/``.pt`` path, or the model
+            cannot be loaded.
+        BackendUnavailableError: a ``.pt`` file was given and ultralytics is not installed.
+    """
+    if str(spec) == "classical":
+        return ClassicalDetector(config, **kwargs)
+    path = Path(spec)
+    suffix = path.suffix.lower()
+    if suffix == ".onnx":
+        return OnnxYoloDetector(path, config, **kwargs)
+    if suffix == ".pt":
+        return UltralyticsDetector(path, config, **kwargs)
+    raise ModelError(path, "unknown detector: expected 'classical', a .onnx model or .pt weights")
