@@ -1,0 +1,233 @@
+"""OnnxYoloDetector against tiny ONNX graphs emitting each YOLO output layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lapwrench.perception import (
+    DetectorConfig,
+    FrameError,
+    ModelError,
+    OnnxYoloDetector,
+    OutputLayout,
+    TrackingPoint,
+    TrackingPointRule,
+    make_detector,
+)
+from lapwrench.perception.synthetic import make_constant_yolo_onnx
+
+LAYOUTS = {
+    "yolov5": OutputLayout.YOLOV5,
+    "yolov7_raw": OutputLayout.YOLOV5,
+    "yolov8": OutputLayout.YOLOV8,
+    "yolov7_e2e": OutputLayout.YOLOV7_E2E,
+    "yolov7_e2e_split": OutputLayout.YOLOV7_E2E_SPLIT,
+}
+# (model input (h, w), dynamic axes): ratio 1 with 80 px bars, ratio 0.5, and stride-aligned 320x256.
+GEOMETRIES = [((640, 640), False), ((320, 320), False), ((320, 320), True)]
+
+
+def summary(dets):
+    return [(d.class_id, round(d.score, 4)) for d in dets]
+
+
+def assert_matches(dets, truth, names):
+    assert summary(dets) == [(truth[n].cls, truth[n].score) for n in names]
+    for d, n in zip(dets, names, strict=True):
+        np.testing.assert_allclose(d.box, truth[n].box, atol=1e-3)
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+@pytest.mark.parametrize(("input_hw", "dynamic"), GEOMETRIES)
+def test_each_layout_decodes_and_unletterboxes(make_layout_model, frame, truth, layout, input_hw, dynamic):
+    det = OnnxYoloDetector(make_layout_model(layout, input_hw, dynamic), input_size=input_hw if dynamic else None)
+    assert det.layout.layout is LAYOUTS[layout]
+    assert det.dynamic is dynamic
+    dets = det.detect(frame)
+    # Per-class NMS drops A_dup (raw layouts) but keeps B (another class); D is below 0.25.
+    assert_matches(dets, truth, ["A", "B", "C"])
+    # Default tracking point: the box centre (u, v).
+    assert dets[0].point == pytest.approx((150.0, 140.0), abs=1e-3)
+
+
+def test_dynamic_input_is_stride_aligned(make_layout_model):
+    det = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True), input_size=320)
+    assert det.input_shape_for((480, 640)) == (256, 320)
+    default = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True))
+    assert default.input_shape_for((480, 640)) == (480, 640)  # 640 default: no padding at all
+    static = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=False))
+    assert static.input_shape_for((480, 640)) == (320, 320)
+
+
+@pytest.mark.parametrize("layout", ["yolov5", "yolov8"])
+def test_agnostic_nms_suppresses_across_classes(make_layout_model, frame, truth, layout):
+    det = OnnxYoloDetector(make_layout_model(layout), DetectorConfig(agnostic_nms=True))
+    assert_matches(det.detect(frame), truth, ["A", "C"])
+
+
+@pytest.mark.parametrize("layout", ["yolov5", "yolov8"])
+def test_high_iou_threshold_keeps_duplicates(make_layout_model, frame, truth, layout):
+    det = OnnxYoloDetector(make_layout_model(layout), DetectorConfig(iou_threshold=0.95))
+    assert_matches(det.detect(frame), truth, ["A", "A_dup", "B", "C"])
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_class_filter(make_layout_model, frame, truth, layout):
+    det = OnnxYoloDetector(make_layout_model(layout), DetectorConfig(classes=frozenset({2})))
+    assert_matches(det.detect(frame), truth, ["C"])
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_score_threshold(make_layout_model, frame, truth, layout):
+    det = OnnxYoloDetector(make_layout_model(layout), DetectorConfig(score_threshold=0.65))
+    assert_matches(det.detect(frame), truth, ["A", "B"])
+    low = OnnxYoloDetector(make_layout_model(layout), DetectorConfig(score_threshold=0.05))
+    assert [d.score for d in low.detect(frame)][-1] == pytest.approx(0.10)
+
+
+def test_max_detections(make_layout_model, frame, truth):
+    det = OnnxYoloDetector(make_layout_model("yolov8"), DetectorConfig(max_detections=1))
+    assert_matches(det.detect(frame), truth, ["A"])
+
+
+def test_v5_score_is_objectness_times_class_probability(tmp_path, frame):
+    rows = np.zeros((40, 7), np.float32)
+    rows[:, :4] = [10, 10, 4, 4]
+    rows[3] = [320, 320, 100, 100, 0.8, 0.25, 0.75]  # obj 0.8, best class 1 with p 0.75
+    det = OnnxYoloDetector(make_constant_yolo_onnx(tmp_path / "m.onnx", {"output": rows[None]}))
+    (d,) = det.detect(frame)
+    assert d.class_id == 1
+    assert d.score == pytest.approx(0.6)
+    assert d.box == pytest.approx((270.0, 190.0, 370.0, 290.0))
+
+
+def test_boxes_are_clipped_to_the_frame(tmp_path, frame):
+    rows = np.zeros((40, 6), np.float32)
+    rows[0] = [5, 320, 60, 40, 0.9, 1.0]  # extends left of the frame
+    det = OnnxYoloDetector(make_constant_yolo_onnx(tmp_path / "m.onnx", {"output": rows[None]}))
+    (d,) = det.detect(frame)
+    assert d.box == pytest.approx((0.0, 220.0, 35.0, 260.0))
+
+
+def test_class_names_from_ultralytics_metadata(make_layout_model, frame):
+    meta = {"names": "{0: 'grasper', 1: 'scissors', 2: 'hook'}", "stride": "32"}
+    det = OnnxYoloDetector(make_layout_model("yolov8", metadata=meta))
+    assert [d.class_name for d in det.detect(frame)] == ["grasper", "scissors", "hook"]
+    named = OnnxYoloDetector(make_layout_model("yolov5"), class_names=["a", "b", "c"])
+    assert [d.class_name for d in named.detect(frame)] == ["a", "b", "c"]
+
+
+def test_bgr_frames_are_accepted(make_layout_model, frame, truth):
+    det = OnnxYoloDetector(make_layout_model("yolov8"), DetectorConfig(color_order="bgr"))
+    assert_matches(det.detect(frame), truth, ["A", "B", "C"])
+
+
+def test_tracking_point_rule_is_applied(make_layout_model, frame):
+    rule = TrackingPointRule(TrackingPoint.EDGE_NEAREST_REFERENCE)
+    det = OnnxYoloDetector(make_layout_model("yolov8"), DetectorConfig(tracking_point=rule))
+    a = det.detect(frame)[0]  # box (100, 100, 200, 180); image centre (320, 240): right edge
+    assert a.point == pytest.approx((200.0, 140.0))
+
+
+def test_make_detector_dispatches_on_suffix(make_layout_model, tmp_path):
+    assert isinstance(make_detector(make_layout_model("yolov8")), OnnxYoloDetector)
+    with pytest.raises(ModelError, match="unknown detector"):
+        make_detector(tmp_path / "model.tflite")
+
+
+# -- bad models --------------------------------------------------------------------------------
+
+
+def test_missing_model_file(tmp_path):
+    path = tmp_path / "nope.onnx"
+    with pytest.raises(ModelError, match="not found") as exc:
+        OnnxYoloDetector(path)
+    assert str(path) in str(exc.value)
+
+
+def test_directory_is_not_a_model(tmp_path):
+    with pytest.raises(ModelError, match="not a file"):
+        OnnxYoloDetector(tmp_path)
+
+
+def test_corrupt_model_file(tmp_path):
+    path = tmp_path / "corrupt.onnx"
+    path.write_bytes(np.random.default_rng(1).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    with pytest.raises(ModelError, match="cannot load as an ONNX model") as exc:
+        OnnxYoloDetector(path)
+    assert exc.value.path == str(path)
+
+
+@pytest.mark.parametrize(
+    "outputs",
+    [
+        {"out": np.zeros((1, 6, 6), np.float32)},  # square: channel axis undecidable
+        {"out": np.zeros((20, 6), np.float32)},  # rank 2 but not [N, 7]
+        {"out": np.zeros((1, 3, 20, 20, 9), np.float32)},  # rank 5 only
+        {"a": np.zeros((1, 100, 9), np.float32), "b": np.zeros((1, 100, 9), np.float32)},  # which one?
+        {"out": np.zeros((1, 100, 4), np.float32)},  # too narrow for any layout
+    ],
+    ids=["square", "rank2", "rank5", "two-candidates", "narrow"],
+)
+def test_unknown_layout_raises(tmp_path, outputs):
+    path = make_constant_yolo_onnx(tmp_path / "weird.onnx", outputs)
+    with pytest.raises(ModelError, match="unknown YOLO output layout") as exc:
+        OnnxYoloDetector(path)
+    assert str(path) in str(exc.value)
+
+
+def test_forced_layout_that_does_not_fit_raises(make_layout_model):
+    with pytest.raises(ModelError, match="does not fit layout"):
+        OnnxYoloDetector(make_layout_model("yolov7_e2e"), layout="yolov8")
+
+
+def test_forced_layout_overrides_auto(tmp_path, frame):
+    # [1, 6, 6] is ambiguous in auto mode; forcing v8 decodes it (nc = 2).
+    out = np.zeros((1, 6, 6), np.float32)
+    out[0, :, 0] = [320, 320, 40, 40, 0.1, 0.9]
+    det = OnnxYoloDetector(make_constant_yolo_onnx(tmp_path / "m.onnx", {"o": out}), layout="yolov8")
+    (d,) = det.detect(frame)
+    assert (d.class_id, d.score) == (1, pytest.approx(0.9))
+
+
+def test_fixed_input_size_conflict(make_layout_model):
+    with pytest.raises(ModelError, match="fixed input"):
+        OnnxYoloDetector(make_layout_model("yolov8", (640, 640)), input_size=320)
+
+
+# -- bad frames --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("image", "match"),
+    [
+        (np.zeros((0, 0, 3), np.uint8), "empty"),
+        (np.zeros((480, 0, 3), np.uint8), "empty"),
+        (np.zeros((240, 320, 3), np.uint8), "expected 640x480"),
+        (np.zeros((480, 640, 3), np.float32), "dtype must be uint8"),
+        (np.zeros((480, 640), np.uint8), "H x W x 3"),
+        (np.zeros((480, 640, 4), np.uint8), "H x W x 3"),
+        ([[0, 0, 0]], "numpy array"),
+    ],
+    ids=["empty", "zero-width", "wrong-size", "float", "gray-2d", "rgba", "list"],
+)
+def test_bad_frames_raise(make_layout_model, image, match):
+    det = OnnxYoloDetector(make_layout_model("yolov8"))
+    with pytest.raises(FrameError, match=match):
+        det.detect(image)
+
+
+def test_non_contiguous_frame_is_fine(make_layout_model, truth):
+    det = OnnxYoloDetector(make_layout_model("yolov8"))
+    big = np.zeros((480, 1280, 3), np.uint8)
+    view = big[:, ::2]  # strided view, 640 wide
+    assert not view.flags.c_contiguous
+    assert len(det.detect(view)) == 3
+    assert len(det.detect(np.zeros((480, 640, 3), np.uint8)[:, :, ::-1])) == 3
+
+
+def test_any_frame_size_when_unconfigured(make_layout_model):
+    det = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True),
+                           DetectorConfig(frame_size=None), input_size=320)
+    assert det.detect(np.zeros((100, 200, 3), np.uint8)) is not None
