@@ -78,7 +78,7 @@ class TrackingConfig:
     epsilon2: float = _positive(default=200.0)
     F_max: float = _positive(default=10.0)
     ramp: Ramp = "printed"
-    direction: Literal["printed", "image_plane"] = "printed"
+    direction: Literal["printed", "image_plane"] = "image_plane"
 
 
 @dataclass(frozen=True)

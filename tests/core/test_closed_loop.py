@@ -68,13 +68,30 @@ def _instrument_at(cfg: Config, pixels: float) -> np.ndarray:
     return kin.p_C + kin.R_C @ np.array([pixels / cfg.camera.fx * depth, 0.0, depth])
 
 
-def test_instrument_150px_off_centre_is_brought_inside_eps1() -> None:
-    cfg = load()
+@pytest.mark.parametrize(
+    ("preset", "duration"),
+    [({}, 60.0), ({"viscous": {"k_t": 2.0, "k_f": 150.0}}, 3.0)],
+    ids=["paper-damping", "swapped-damping"],
+)
+def test_instrument_150px_off_centre_is_brought_inside_eps1(preset: dict, duration: float) -> None:
+    cfg = load().replace(**preset)
     point = _instrument_at(cfg, 150.0)
-    ctrl, log = run_virtual(cfg, 3.0, instruments=lambda t: point[None])
+    ctrl, log = run_virtual(cfg, duration, instruments=lambda t: point[None])
     d = np.array([np.hypot(*(p[0] - [cfg.camera.u0, cfg.camera.v0])) for p in log.pixels])
     assert d[0] == pytest.approx(150.0, abs=0.5)
     assert log.results[0].mode == "tracking"
     assert d[-1] < cfg.tracking.epsilon1
     assert np.max([r.rcm_error for r in log.results]) < 5e-4
+    # re-centred by pivoting, not by pulling the scope out: the insertion depth barely changes
+    depth = [np.linalg.norm(r.p_R - e) for r, (e, _) in zip(log.results, log.axis_points, strict=True)]
+    assert np.ptp(depth) < 0.01
     _assert_inside_limits(ctrl, log)
+
+
+def test_printed_direction_with_paper_damping_retracts_the_scope() -> None:
+    """Why ``tracking.direction`` defaults to the image-plane reading (see tracking_direction)."""
+    cfg = load().replace(tracking={"direction": "printed"})
+    point = _instrument_at(cfg, 150.0)
+    _, log = run_virtual(cfg, 1.0, instruments=lambda t: point[None])
+    depth = [np.linalg.norm(r.p_R - e) for r, (e, _) in zip(log.results, log.axis_points, strict=True)]
+    assert depth[-1] - depth[0] > 0.05  # the flange moved 5+ cm away from the RCM: the scope was pulled out

@@ -59,6 +59,7 @@ def test_virtual_force_sums_instruments_and_saturates() -> None:
     far_left = np.array([[CAM.u0 - 300.0, CAM.v0]])
     F_r = virtual_force(far_right, CAM, CFG.tracking, R_C)
     assert np.linalg.norm(F_r) == pytest.approx(CFG.tracking.F_max)
-    both = virtual_force(np.vstack([far_right, far_left]), CAM, CFG.tracking, R_C)
+    printed = CFG.replace(tracking={"direction": "printed"}).tracking
+    both = virtual_force(np.vstack([far_right, far_left]), CAM, printed, R_C)
     assert abs(both[0]) < 1e-9  # lateral parts cancel, the printed retraction parts add
     assert both[2] < 0
