@@ -60,7 +60,7 @@ def test_file_frames_are_rgb_uint8_with_increasing_index(video: Path) -> None:
     r, g, b = (float(f.image[..., c].mean()) for c in range(3))
     assert r > 180 and b < 40  # RGB order, not BGR
     assert g == pytest.approx((N_FRAMES - 1) * 20, abs=25)
-    assert first.value.index == 0
+    assert first.value.index == first.seq - 1  # no frame dropped
     assert s.seq == N_FRAMES
     assert cam.status().malformed == 0
     assert not cam.running
@@ -89,6 +89,8 @@ def test_loop_keeps_streaming(video: Path) -> None:
 
 def test_stop_while_paced_is_prompt(video: Path) -> None:
     cam = Camera(video, playback_fps=2.0).start()  # 0.5 s between frames
+    first = cam.latest()
+    assert first is not None and first.value.index == 0  # start() publishes frame 0 itself
     t0 = time.monotonic()
     cam.stop()
     assert time.monotonic() - t0 < 0.5

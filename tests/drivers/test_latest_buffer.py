@@ -31,6 +31,8 @@ def test_put_get_seq_age_fresh() -> None:
     assert buf.fresh(0.6, now=11.0)
     assert not buf.fresh(0.4, now=11.0)
     assert latest.age(now=12.0) == pytest.approx(1.5)
+    assert buf.get_fresh(0.6, now=11.0) is s2
+    assert buf.get_fresh(0.4, now=11.0) is None
 
 
 def test_default_timestamp_is_monotonic_now() -> None:

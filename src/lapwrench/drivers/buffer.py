@@ -99,6 +99,17 @@ class LatestValue(Generic[T]):
         """True if a sample exists and it is at most ``max_age`` seconds old."""
         return self.age(now) <= max_age
 
+    def get_fresh(self, max_age: float, now: float | None = None) -> Sample[T] | None:
+        """The latest sample if it is at most ``max_age`` s old, else ``None``. Never blocks.
+
+        This is the call a control loop makes each cycle: ``None`` means "switch this source's
+        wrench off".
+        """
+        sample = self._sample
+        if sample is None or sample.age(now) > max_age:
+            return None
+        return sample
+
     def clear(self) -> None:
         """Forget the latest sample (the sequence number keeps counting)."""
         with self._cond:
@@ -226,6 +237,11 @@ class RateMonitor:
             self._count += 1
             self._last_time = t
             self._prune(t)
+
+    def forget_seq(self) -> None:
+        """Forget the last device sequence number (call when the device stream is restarted)."""
+        with self._lock:
+            self._last_seq = None
 
     def add_drops(self, n: int = 1) -> None:
         """Add ``n`` drops detected by other means (e.g. a lost camera frame)."""

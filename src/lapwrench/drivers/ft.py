@@ -292,6 +292,9 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
 
     def _after_thread_start(self) -> None:
         self._configure_device()
+        self.rate.forget_seq()  # the device restarts its sequence counter on a new start command
+        latest = self.buffer.get()
+        seq0 = 0 if latest is None else latest.seq  # wait for data newer than a previous run's
         deadline = time.monotonic() + self.start_timeout
         last_err: str | None = None
         while True:
@@ -302,7 +305,7 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 break
-            if self.buffer.wait_newer(0, min(self.start_retry_s, remaining)) is not None:
+            if self.buffer.wait_newer(seq0, min(self.start_retry_s, remaining)) is not None:
                 return
             if time.monotonic() >= deadline:
                 break
@@ -327,11 +330,11 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
 
     def _handle_datagram(self, data: bytes, now: float) -> None:
         rec = unpack_record(data)
+        if not self.rate.check_seq(rec.sequence):
+            return  # duplicate / out-of-order, counted by the rate monitor
         if rec.status & self.status_error_mask:
             self.last_status = rec.status
             raise StatusError(f"device status 0x{rec.status:08x}")
-        if not self.rate.check_seq(rec.sequence):
-            return  # duplicate / out-of-order, counted by the rate monitor
         raw = np.asarray(rec.counts, dtype=np.float64) * self._scale
         tare = self._tare
         if tare is not None and not tare.done.is_set():
