@@ -17,6 +17,8 @@ from lapwrench.perception import (
 )
 from lapwrench.perception.synthetic import make_constant_yolo_onnx
 
+pytest.importorskip("onnx", reason="these tests build ONNX graphs with the onnx helper API (dev extra)")
+
 LAYOUTS = {
     "yolov5": OutputLayout.YOLOV5,
     "yolov7_raw": OutputLayout.YOLOV5,

@@ -31,7 +31,7 @@ class CalibrationError(RuntimeError):
     """Calibration failed: unreadable images, inconsistent sizes, or too few usable views."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CalibrationResult:
     """Intrinsics estimated by :func:`calibrate_from_images`.
 
