@@ -11,6 +11,17 @@ newest :class:`Sample` and switches a source's wrench off when ``fresh(max_age)`
 * :mod:`~lapwrench.drivers.camera`: laparoscope camera through OpenCV ``VideoCapture``.
 * :mod:`~lapwrench.drivers.fakes`: a loopback fake F/T box for tests and dry runs.
 
+Typical use (one source shown)::
+
+    ft = OnRobotHexSensor("192.168.1.1").start()  # raises DeviceOpenError/DeviceTimeoutError
+    ft.tare(n_samples=200)                         # handle untouched
+    ...
+    # in the 1 kHz loop: never blocks
+    s = ft.buffer.get_fresh(max_age=0.01)
+    wrench = None if s is None else s.value        # None -> that wrench is switched off
+    ...
+    ft.stop()
+
 The camera module (OpenCV) and the fakes are imported lazily on first attribute access, so
 ``import lapwrench.drivers`` stays light for code that only needs the F/T or tactile readers.
 """

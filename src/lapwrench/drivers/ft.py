@@ -291,7 +291,10 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         """Hook for device-specific configuration sent before the start command."""
 
     def _after_thread_start(self) -> None:
-        self._configure_device()
+        try:
+            self._configure_device()
+        except OSError as exc:
+            raise DeviceOpenError(self.device, f"configuration command failed: {exc}") from exc
         self.rate.forget_seq()  # the device restarts its sequence counter on a new start command
         latest = self.buffer.get()
         seq0 = 0 if latest is None else latest.seq  # wait for data newer than a previous run's
