@@ -1,0 +1,37 @@
+"""Shared fixtures for the simulation tests (headless EGL rendering by default)."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import pytest
+
+from lapwrench.sim.scene import Scene, SceneConfig, build_scene
+from lapwrench.sim.world import SimWorld
+
+
+@pytest.fixture(scope="session")
+def panda_scene() -> Scene:
+    """The default Panda world, compiled once per session."""
+    return build_scene(SceneConfig(kind="panda"))
+
+
+@pytest.fixture
+def world(panda_scene: Scene) -> SimWorld:
+    """A fresh SimWorld on the shared Panda scene (its own MjData)."""
+    w = SimWorld(panda_scene)
+    yield w
+    w.close()
+
+
+def make_renderable_world(scene: Scene) -> SimWorld:
+    """A world whose renderer works, or a pytest skip naming why EGL is unusable."""
+    w = SimWorld(scene)
+    try:
+        w.render()
+    except Exception as exc:  # GL context creation fails without EGL/Mesa
+        w.close()
+        pytest.skip(f"headless rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}")
+    return w
