@@ -353,34 +353,35 @@ def _dress_scope(spec: mujoco.MjSpec, scope: ScopeGeometry, cam: CameraIntrinsic
 # Textures and materials
 
 
-def _organ_texture(size: int = 256, seed: int = 7) -> np.ndarray:
-    """Procedural tissue texture: pink-red base, smooth blotches, dark vessels, fat patches."""
+def _organ_texture(size: int = 512, seed: int = 7) -> np.ndarray:
+    """Procedural tissue texture: pink-red base, smooth mottling, fine vessels, fat patches (tileable)."""
     rng = np.random.default_rng(seed)
     y, x = np.mgrid[0:size, 0:size] / size
     noise = np.zeros((size, size))
-    for k in range(1, 6):
+    for k in range(1, 8):
         for _ in range(3):
-            fx, fy = rng.integers(1, 3 * k + 2, size=2)
+            fx, fy = rng.integers(1, 4 * k + 2, size=2)
             ph = rng.uniform(0, 2 * np.pi, size=2)
             noise += np.sin(2 * np.pi * fx * x + ph[0]) * np.sin(2 * np.pi * fy * y + ph[1]) / k
     noise = (noise - noise.min()) / (np.ptp(noise) + 1e-9)
-    base = np.array([176.0, 62.0, 58.0])
-    light = np.array([222.0, 128.0, 112.0])
+    base = np.array([168.0, 58.0, 56.0])
+    light = np.array([226.0, 132.0, 118.0])
     img = base + (light - base) * noise[..., None]
-    fat = noise > 0.82
-    img[fat] = 0.5 * img[fat] + 0.5 * np.array([230.0, 196.0, 120.0])
-    for _ in range(14):  # vessels: smooth random walks, wrapped (the texture tiles)
+    img *= rng.uniform(0.94, 1.06, size=(size, size, 1))  # fine grain
+    fat = noise > 0.84
+    img[fat] = 0.45 * img[fat] + 0.55 * np.array([232.0, 200.0, 128.0])
+    vessel = np.array([120.0, 28.0, 48.0])
+    for _ in range(10):  # vessels: smooth, branching-free random walks, wrapped (the texture tiles)
         p = rng.uniform(0, size, size=2)
         ang = rng.uniform(0, 2 * np.pi)
-        width = rng.uniform(0.8, 2.2)
-        for _ in range(220):
-            ang += rng.normal(0.0, 0.18)
+        w = int(rng.integers(0, 2))
+        for _ in range(400):
+            ang += rng.normal(0.0, 0.12)
             p = (p + np.array([np.cos(ang), np.sin(ang)])) % size
             i0, j0 = int(p[1]), int(p[0])
-            w = math.ceil(width)
             rows = np.arange(i0 - w, i0 + w + 1) % size
             cols = np.arange(j0 - w, j0 + w + 1) % size
-            img[np.ix_(rows, cols)] = 0.55 * img[np.ix_(rows, cols)] + 0.45 * np.array([110.0, 20.0, 40.0])
+            img[np.ix_(rows, cols)] = 0.7 * img[np.ix_(rows, cols)] + 0.3 * vessel
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
@@ -394,7 +395,7 @@ def _add_materials(spec: mujoco.MjSpec) -> None:
         nchannel=3,
     )
     t.data = tex.tobytes()
-    m = spec.add_material(name="tissue", specular=0.35, shininess=0.6, texrepeat=[2, 2])
+    m = spec.add_material(name="tissue", specular=0.35, shininess=0.6, texrepeat=[1, 1])
     m.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "tissue"
     m = spec.add_material(name="organ", specular=0.5, shininess=0.7, texrepeat=[1, 1], rgba=[0.95, 0.8, 0.8, 1])
     m.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "tissue"
@@ -432,7 +433,7 @@ def _add_materials(spec: mujoco.MjSpec) -> None:
 
 
 def _wall_mesh(
-    size_x: float, size_y: float, thickness: float, holes: list[tuple[float, float, float]], cell: float = 0.005
+    size_x: float, size_y: float, thickness: float, holes: list[tuple[float, float, float]], cell: float = 0.01
 ) -> tuple[np.ndarray, np.ndarray]:
     """Slab (top + bottom faces) on a grid, without the cells inside the circular ``holes``."""
     nx, ny = round(size_x / cell), round(size_y / cell)
@@ -514,14 +515,14 @@ def _add_phantom(spec: mujoco.MjSpec, cfg: SceneConfig, incision: np.ndarray, sc
         housing.add_geom(
             name=f"housing_side_{k}",
             type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=[hx, hy, depth / 2],
-            pos=[px, py, -depth / 2],
+            size=[hx, hy, (depth + wt / 2) / 2],
+            pos=[px, py, (wt / 2 - depth) / 2],
             material="housing",
             **vis,
         )
     # Body wall: skin slab with holes at the incision and the two ports.
-    hole_r = 0.011
-    holes = [(0.0, 0.0, hole_r)] + [(px, py, 0.008) for px, py in ph.port_offsets]
+    # 1 cm cells keep the mesh light for the software rasteriser (~4k triangles).
+    holes = [(0.0, 0.0, 0.012)] + [(px, py, 0.01) for px, py in ph.port_offsets]
     verts, faces = _wall_mesh(sx, sy, wt, holes)
     mesh = spec.add_mesh(name="body_wall")
     mesh.uservert = verts.ravel().tolist()
@@ -637,7 +638,7 @@ def _add_instruments(spec: mujoco.MjSpec, incision: np.ndarray, ph: PhantomConfi
     vis = {"contype": 0, "conaffinity": 0, "group": 2, "density": 0.0}
     for body, tip_site, (px, py) in zip(INSTRUMENT_BODIES, INSTRUMENT_TIP_SITES, ph.port_offsets, strict=True):
         port = incision + np.array([px, py, 0.0])
-        tip = incision + np.array([0.45 * px, 0.3 * py, -0.11])
+        tip = incision + np.array([0.3 * px - 0.01, 0.22 * py, -0.125])
         pos, quat = instrument_pose_through_port(port, tip)
         b = spec.worldbody.add_body(name=body, mocap=True, pos=list(pos), quat=list(quat))
         b.add_geom(

@@ -124,6 +124,8 @@ class SimWorld:
         self._tip_sites = [m.site(s).id for s in INSTRUMENT_TIP_SITES]
         self._cam = m.camera(CAMERA_NAME).id
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._scope_vopt = mujoco.MjvOption()
+        self._scope_vopt.geomgroup[1] = 0
         self._q_ref_prev: np.ndarray | None = None
         self._warn_idx = [
             int(mujoco.mjtWarning.mjWARN_BADQACC),
@@ -385,5 +387,6 @@ class SimWorld:
             r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
             self._renderers[key] = r
-        r.update_scene(self.data, camera=camera)
+        # The arm (geom group 1) is never in the laparoscope's view: skip drawing it there.
+        r.update_scene(self.data, camera=camera, scene_option=self._scope_vopt if camera == CAMERA_NAME else None)
         return r.render()
