@@ -52,7 +52,9 @@ def cmd_virtual(args: argparse.Namespace) -> int:
         return (centre + kin.R_C @ lateral)[None]
 
     def hand_force(t: float) -> np.ndarray:
-        return np.array([8.0, 0.0, 0.0]) if 4.0 <= t < 8.0 else (np.array([0.0, -6.0, 0.0]) if 12 <= t < 15 else np.zeros(3))
+        if 4.0 <= t < 8.0:
+            return np.array([8.0, 0.0, 0.0])
+        return np.array([0.0, -6.0, 0.0]) if 12.0 <= t < 15.0 else np.zeros(3)
 
     def grip(t: float) -> float:
         return 2.0 if 3.5 <= t < 8.5 else (1.1 if 11.5 <= t < 15.5 else 0.0)

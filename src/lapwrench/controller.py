@@ -5,6 +5,7 @@ sensors → wrenches → task/null-space allocation → integration → limits �
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -40,6 +41,10 @@ from lapwrench.wrenches import InteractionWrench, RcmWrench, TrackingWrench, Vis
 from lapwrench.wrenches.base import DampingSource, TaskGeometry, TickContext, WrenchSource
 
 Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
+
+
+def _norm(v: Vec) -> float:
+    return math.sqrt(float(v @ v))
 
 
 def classify_mode(handle_force: float, tracking_force: float) -> Mode:
@@ -102,6 +107,7 @@ class Controller:
         self.viscous = ViscousWrench(cfg.viscous)
         self.rcm_wrench = RcmWrench(cfg.rcm)
         self.null_sources: list[WrenchSource] = [self.interaction, self.tracking, self.viscous, *extra_sources]
+        self.damping_sources = [s for s in self.null_sources if isinstance(s, DampingSource)]
         self.shaper = ReferenceShaper(
             self.model.limits, self.dt, cfg.robot.limit_fraction, cfg.robot.position_margin
         )
@@ -133,7 +139,7 @@ class Controller:
         inputs = self.validator.validate(frame)
         self.events.extend(inputs.events)
         kin = self.model.kinematics(self.ref.q, self.ref.dq)
-        Minv = np.linalg.inv(kin.M)
+        Minv = self.model.mass_matrix_inverse(kin.q)
 
         # 2. adaptive RCM point (eq 19-26)
         residual = self._residual(kin, inputs)
@@ -168,15 +174,14 @@ class Controller:
 
         wrenches = {"rcm": W_r.vector}
         wrenches.update({s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)})
-        F_h = float(np.linalg.norm(wrenches["interaction"][3:]))
-        F_c = float(np.linalg.norm(wrenches["tracking"][3:]))
-        if np.linalg.norm(geo.e_R) > self.cfg.inputs.max_rcm_error:
-            self.events.append(InputEvent(frame.time, "rcm", f"RCM error {np.linalg.norm(geo.e_R)*1e3:.1f} mm"))
+        F_h, F_c = _norm(wrenches["interaction"][3:]), _norm(wrenches["tracking"][3:])
+        if _norm(geo.e_R) > self.cfg.inputs.max_rcm_error:
+            self.events.append(InputEvent(frame.time, "rcm", f"RCM error {_norm(geo.e_R) * 1e3:.1f} mm"))
         return TickResult(
             time=frame.time,
-            q_ref=self.ref.q.copy(),
-            dq_ref=self.ref.dq.copy(),
-            ddq_ref=self.ref.ddq.copy(),
+            q_ref=self.ref.q,
+            dq_ref=self.ref.dq,
+            ddq_ref=self.ref.ddq,
             tau=tau,
             wrenches=wrenches,
             W_n=W_n,
@@ -219,7 +224,6 @@ class Controller:
     def _damping(self, geo: TaskGeometry, N_r: np.ndarray) -> np.ndarray:
         """B = J_Rᵀ K_d J_R + N_rᵀ J_Gᵀ D J_G: the θ̇-Jacobian of -τ from eq (14) and the damping sources."""
         B = self.cfg.rcm.Kd * geo.J_R.T @ geo.J_R
-        for s in self.null_sources:
-            if isinstance(s, DampingSource):
-                B = B + N_r.T @ geo.J_G.T @ s.damping_matrix() @ geo.J_G
+        for s in self.damping_sources:
+            B += N_r.T @ (geo.J_G.T @ (s.damping_matrix() @ geo.J_G))
         return B

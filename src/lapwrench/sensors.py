@@ -7,6 +7,7 @@ invalid reaches the command.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -88,11 +89,19 @@ class ValidInputs:
 
 
 def _vector(x: object, n: int) -> Vec | None:
+    """``x`` as a float vector of length n, or None if it is not one."""
+    if type(x) is np.ndarray and x.dtype == np.float64:
+        return x if x.shape == (n,) else None
     try:
         a = np.asarray(x, dtype=float)
     except (TypeError, ValueError):
         return None
     return a if a.shape == (n,) else None
+
+
+def _finite(*arrays: Vec) -> bool:
+    # a sum is NaN/inf iff some element is (or it overflows, which is out of range anyway)
+    return all(math.isfinite(a.sum()) for a in arrays)
 
 
 class InputValidator:
@@ -127,10 +136,10 @@ class InputValidator:
             f, m = _vector(frame.ft.force, 3), _vector(frame.ft.torque, 3)
             if f is None or m is None:
                 reject("ft", "F/T reading must be two 3-vectors")
-            elif not (np.all(np.isfinite(f)) and np.all(np.isfinite(m))):
+            elif not _finite(f, m):
                 reject("ft", "F/T reading is not finite")
-            elif np.linalg.norm(f) > self.interaction.force_range or np.linalg.norm(m) > self.interaction.torque_range:
-                reject("ft", f"F/T out of range (|F|={np.linalg.norm(f):.1f} N, |M|={np.linalg.norm(m):.2f} N m)")
+            elif math.sqrt(f @ f) > self.interaction.force_range or math.sqrt(m @ m) > self.interaction.torque_range:
+                reject("ft", f"F/T out of range (|F|={math.sqrt(f @ f):.1f} N, |M|={math.sqrt(m @ m):.2f} N m)")
             else:
                 out.ft = ForceTorqueReading(f, m, frame.ft.stamp)
 
@@ -138,23 +147,22 @@ class InputValidator:
             v = _vector(frame.tactile.values, TACTILE_ELEMENTS)
             if v is None:
                 reject("tactile", f"tactile reading must have {TACTILE_ELEMENTS} elements")
-            elif not np.all(np.isfinite(v)):
+            elif not _finite(v):
                 reject("tactile", "tactile reading is not finite")
-            elif np.any(v < 0.0) or np.any(v > TACTILE_MAX):
+            elif v.min() < 0.0 or v.max() > TACTILE_MAX:
                 reject("tactile", "tactile element outside [0, 255]")
             else:
                 out.tactile = TactileReading(v, frame.tactile.stamp)
 
         if frame.instruments is not None:
-            pts = np.asarray(frame.instruments.points, dtype=float).reshape(-1, 2) if np.size(
-                frame.instruments.points
-            ) % 2 == 0 else None
+            raw = frame.instruments.points
+            pts = np.asarray(raw, dtype=float) if np.ndim(raw) == 2 and np.shape(raw)[1:] == (2,) else None
             cam = self.camera
             if pts is None:
                 reject("instruments", "image points must be (n, 2)")
-            elif not np.all(np.isfinite(pts)):
+            elif not _finite(pts):
                 reject("instruments", "image point is not finite")
-            elif np.any(pts < 0.0) or np.any(pts[:, 0] > cam.width) or np.any(pts[:, 1] > cam.height):
+            elif len(pts) and (pts.min() < 0.0 or pts[:, 0].max() > cam.width or pts[:, 1].max() > cam.height):
                 reject("instruments", f"image point outside the {cam.width}x{cam.height} image")
             elif not np.isfinite(frame.instruments.stamp) or t - frame.instruments.stamp > self.max_image_age:
                 reject("instruments", f"detection older than {self.max_image_age} s")
@@ -167,17 +175,17 @@ class InputValidator:
             tol = self.position_tolerance
             if q is None or dq is None:
                 reject("robot", "robot state must hold 7 joint positions and velocities")
-            elif not (np.all(np.isfinite(q)) and np.all(np.isfinite(dq))):
+            elif not _finite(q, dq):
                 reject("robot", "robot state is not finite")
-            elif np.any(q < lim.position_lower - tol) or np.any(q > lim.position_upper + tol):
+            elif (q < lim.position_lower - tol).any() or (q > lim.position_upper + tol).any():
                 reject("robot", "joint position outside the joint limits")
-            elif np.any(np.abs(dq) > self.velocity_factor * lim.velocity):
+            elif (np.abs(dq) > self.velocity_factor * lim.velocity).any():
                 reject("robot", "joint velocity beyond the velocity limits")
             else:
                 fext = None
                 if frame.robot.external_force is not None:
                     fext = _vector(frame.robot.external_force, 3)
-                    if fext is None or not np.all(np.isfinite(fext)) or np.linalg.norm(fext) > self.max_external_force:
+                    if fext is None or not _finite(fext) or math.sqrt(fext @ fext) > self.max_external_force:
                         reject("external_force", "external force estimate invalid or out of range")
                         fext = None
                 out.robot = RobotReading(q, dq, fext, frame.robot.stamp)

@@ -38,39 +38,41 @@ class ReferenceShaper:
         self.dt = dt
         self.q_lo = limits.position_lower + position_margin
         self.q_hi = limits.position_upper - position_margin
-        self.a_brake = 0.5 * self.lim.acceleration
+        self.two_a_brake = self.lim.acceleration  # braking at half the acceleration limit
+        self.jerk_step = self.lim.jerk * dt
+        self.two_over_jerk = 2.0 / self.lim.jerk
         self.clamped_ticks = 0
 
     def _velocity_bounds(self, q: Vec) -> tuple[Vec, Vec]:
-        room_hi = np.maximum(self.q_hi - q, 0.0)
-        room_lo = np.maximum(q - self.q_lo, 0.0)
-        v_hi = np.minimum(self.lim.velocity, np.sqrt(2.0 * self.a_brake * room_hi))
-        v_lo = -np.minimum(self.lim.velocity, np.sqrt(2.0 * self.a_brake * room_lo))
+        """Velocity band at q: the velocity limit, and the speed from which braking at a_brake stops
+        the joint at its position margin, v² = 2 a_brake (room to the limit)."""
+        v_hi = np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * np.maximum(self.q_hi - q, 0.0)))
+        v_lo = -np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * np.maximum(q - self.q_lo, 0.0)))
         return v_lo, v_hi
 
     def _reachable_acceleration(self, headroom: Vec) -> Vec:
         """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
         jerk-limited ramp of the acceleration back to zero. Negative headroom brakes at once."""
         dt, j = self.dt, self.lim.jerk
-        a = j * (np.sqrt(dt * dt + 2.0 * np.maximum(headroom, 0.0) / j) - dt)
+        a = j * (np.sqrt(dt * dt + self.two_over_jerk * np.maximum(headroom, 0.0)) - dt)
         return np.where(headroom >= 0.0, a, headroom / dt)
 
     def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
         """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` that respects every limit."""
         dt = self.dt
         a_des = (dq_desired - state.dq) / dt
-        if not np.all(np.isfinite(a_des)):
+        if not np.isfinite(a_des).all():
             a_des = -state.dq / dt  # never propagate a NaN: brake instead
         v_lo, v_hi = self._velocity_bounds(state.q + state.dq * dt)
         a_max = self.lim.acceleration
-        a_lo = np.clip(-self._reachable_acceleration(state.dq - v_lo), -a_max, a_max)
-        a_hi = np.clip(self._reachable_acceleration(v_hi - state.dq), -a_max, a_max)
-        j_step = self.lim.jerk * dt
-        a_lo = np.clip(a_lo, state.ddq - j_step, state.ddq + j_step)
-        a_hi = np.clip(a_hi, state.ddq - j_step, state.ddq + j_step)
-        a_hi = np.maximum(a_hi, a_lo)
-        a = np.clip(a_des, a_lo, a_hi)
-        if np.any(a != a_des):
+        a_lo = np.minimum(np.maximum(-self._reachable_acceleration(state.dq - v_lo), -a_max), a_max)
+        a_hi = np.minimum(np.maximum(self._reachable_acceleration(v_hi - state.dq), -a_max), a_max)
+        j_lo = state.ddq - self.jerk_step
+        j_hi = state.ddq + self.jerk_step
+        a_lo = np.minimum(np.maximum(a_lo, j_lo), j_hi)
+        a_hi = np.maximum(np.minimum(np.maximum(a_hi, j_lo), j_hi), a_lo)
+        a = np.minimum(np.maximum(a_des, a_lo), a_hi)
+        if (a != a_des).any():
             self.clamped_ticks += 1
         dq = state.dq + a * dt
         return ReferenceState(state.q + dq * dt, dq, a)

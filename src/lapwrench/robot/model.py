@@ -8,6 +8,7 @@ Jacobian), so nothing downstream calls Pinocchio again.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -45,12 +46,12 @@ class Kinematics:
     p_C: Vec
     R_C: Mat
 
-    @property
+    @cached_property
     def d_z(self) -> Vec:
         """Eq (16): d_z = R_E I_z, the laparoscope direction."""
-        return self.R_E[:, 2]
+        return self.R_E[:, 2].copy()
 
-    @property
+    @cached_property
     def P(self) -> Mat:
         """Eq (17): P = I3 - d_z d_z^T."""
         d = self.d_z
@@ -79,6 +80,7 @@ class RobotModel:
         self.frame_C = self.model.getFrameId(FRAME_C)
         self.limits: JointLimits = franka_limits(kind, self.model)
         self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        self._lower = np.tril_indices(self.nv, -1)
 
     @property
     def length(self) -> float:
@@ -88,7 +90,8 @@ class RobotModel:
         """Evaluate the model at (q, dq): one ``computeAllTerms`` and three frame placements."""
         model, data = self.model, self.data
         pin.computeAllTerms(model, data, q, dq)
-        M = np.triu(data.M) + np.triu(data.M, 1).T
+        M = data.M.copy()
+        M[self._lower] = M.T[self._lower]  # Pinocchio fills the upper triangle only
         oE = pin.updateFramePlacement(model, data, self.frame_E)
         oH = pin.updateFramePlacement(model, data, self.frame_H)
         oC = pin.updateFramePlacement(model, data, self.frame_C)
@@ -108,6 +111,12 @@ class RobotModel:
             p_C=oC.translation.copy(),
             R_C=oC.rotation.copy(),
         )
+
+    def mass_matrix_inverse(self, q: Vec) -> Mat:
+        """M(q)⁻¹ by Pinocchio's ABA-based ``computeMinverse`` (symmetrised)."""
+        Minv = pin.computeMinverse(self.model, self.data, q).copy()
+        Minv[self._lower] = Minv.T[self._lower]
+        return Minv
 
     def frame_pose(self, q: Vec, frame: str) -> pin.SE3:
         """Pose of a named frame at q (convenience, not for the control tick)."""
