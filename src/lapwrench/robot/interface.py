@@ -1,0 +1,41 @@
+"""The robot interface shared by the simulation and the real Franka.
+
+A robot is driven at its control rate with joint position references, like libfranka's
+``start_joint_position_control`` with ``readOnce``/``writeOnce``. Each cycle the caller reads the
+state, computes, and writes exactly one command. ``RobotReading`` (see :mod:`lapwrench.sensors`)
+carries q, dq and the estimated external force on the end effector in {B}.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+from lapwrench.robot.description import RobotKind
+from lapwrench.sensors import RobotReading
+from lapwrench.spatial import Vec
+
+
+class RobotError(RuntimeError):
+    """The robot refused a command, lost the connection or reported a fault."""
+
+
+@runtime_checkable
+class RobotInterface(Protocol):
+    kind: RobotKind
+    dt: float
+
+    def connect(self) -> RobotReading:
+        """Open the connection, start joint position control and return the first state."""
+        ...
+
+    def read(self) -> RobotReading:
+        """The state of the current control cycle (on hardware this waits for the cycle)."""
+        ...
+
+    def command(self, q_ref: Vec) -> None:
+        """The joint position reference for this cycle."""
+        ...
+
+    def disconnect(self) -> None:
+        """Stop control and release the robot (the caller brings it to rest first)."""
+        ...
