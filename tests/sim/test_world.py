@@ -179,3 +179,20 @@ def test_bad_inputs_raise(world: SimWorld) -> None:
         world.set_hand_wrench(np.zeros(5))
     with pytest.raises(ValueError, match="housing load"):
         world.set_housing_load(np.array([np.inf, 0.0, 0.0]))
+
+
+def test_scope_beyond_the_trocar_is_reported(world: SimWorld) -> None:
+    """A pose whose shaft would end above the incision is outside the trocar model: a clear error."""
+    world.reset(world.scene.q0 + np.array([0.0, 0.1, 0.0, 0.25, 0.0, 0.15, 0.0]))
+    assert world.insertion_depth() > world.scene.config.scope.length
+    with pytest.raises(SimulationUnstableError, match=r"insertion depth"):
+        world.step(world.q)
+
+
+def test_housing_load_for_a_10mm_shift(world: SimWorld) -> None:
+    """Fig. 5 disturbance: the helper's load shifts the housing ~10 mm with the scope holding."""
+    load = world.housing_load_for_shift(np.array([0.0, 0.01]))
+    world.set_housing_load(load)
+    _run(world, world.scene.q0, 1500)
+    assert world.housing_displacement()[1] == pytest.approx(0.01, abs=0.0015)
+    assert 5.0 < np.linalg.norm(world.contact_force()) < 12.0

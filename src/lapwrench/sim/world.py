@@ -76,6 +76,10 @@ class JointServoGains:
 class SimWorld:
     """Arm + laparoscope + phantom, stepped at 1 kHz with joint position references.
 
+    Physics: timestep 0.5 ms (``SceneConfig.timestep``), 2 substeps per 1 ms tick, implicitfast
+    integrator. Scope-incision interaction: a soft weld (2 ms time constant) between the shaft and
+    a ball-jointed sliding trocar on the elastic wall (see :mod:`lapwrench.sim.scene`).
+
     All vectors are in the base (= world) frame, SI units. The wall-on-scope contact force, the
     incision position and the physical RCM error are ground truth from the physics.
     """
@@ -117,6 +121,11 @@ class SimWorld:
         self._sleeve_qadr = m.joint("trocar_slide").qposadr[0]
         self._trocar_R0 = self.model.body_quat[m.body(TROCAR_BODY).id].copy()
         self._depth0 = float(m.eq_data[self._weld, 2])
+        scope = scene.config.scope
+        self._depth_min = scope.handle_offset + scope.handle_length / 2.0
+        self._depth_max = scope.length
+        ph = scene.config.phantom
+        self._housing_k = ph.housing_stiffness + ph.wall_stiffness
         self._incision_qadr = np.array([m.joint(n).qposadr[0] for n in INCISION_JOINTS])
         self._housing_qadr = np.array([m.joint(n).qposadr[0] for n in HOUSING_JOINTS])
         self._mocap = [int(m.body_mocapid[m.body(b).id]) for b in INSTRUMENT_BODIES]
@@ -227,6 +236,12 @@ class SimWorld:
             raise SimulationUnstableError(self.time, f"MuJoCo state {', '.join(bad)}", "NaN/inf or huge (reset)")
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise SimulationUnstableError(self.time, "state (qpos/qvel)", "non-finite")
+        depth = self.insertion_depth()
+        if not (self._depth_min < depth < self._depth_max):
+            # The trocar constraint would hold a shaft that is no longer in it.
+            raise SimulationUnstableError(
+                self.time, "insertion depth of the incision along the shaft (m)", f"{depth:.4f}"
+            )
         f = float(np.linalg.norm(self.contact_force()))
         if not math.isfinite(f) or f > self.max_contact_force:
             raise SimulationUnstableError(self.time, "shaft-incision contact force |F| (N)", f"{f:.1f}")
@@ -346,6 +361,14 @@ class SimWorld:
         if f.shape != (3,) or not np.all(np.isfinite(f)):
             raise ValueError(f"housing load must be 3 finite numbers, got {force!r}")
         self.data.xfrc_applied[self._body_housing, :3] = f
+
+    def housing_load_for_shift(self, shift: np.ndarray) -> np.ndarray:
+        """Housing load (N) that shifts the phantom by ``shift`` (m, x/y) while the scope holds still.
+
+        With the shaft held, the housing spring and the wall spring act in parallel.
+        """
+        sh = np.asarray(shift, float)
+        return np.array([sh[0], sh[1], 0.0]) * self._housing_k
 
     def port_position(self, index: int) -> np.ndarray:
         """World position of instrument port ``index`` (0 left, 1 right); moves with the housing."""
