@@ -94,7 +94,7 @@ def test_camera_projects_points_to_paper_intrinsics(panda_scene: Scene) -> None:
     try:
         for k in range(len(points_c)):
             for j, gid in enumerate(ids):
-                scene.model.geom_rgba[gid, 3] = 1.0 if j == k else 0.0
+                w.model.geom_rgba[gid, 3] = 1.0 if j == k else 0.0
             img = w.render().astype(int)
             mask = (img[..., 1] > img[..., 0] + 50) & (img[..., 1] > img[..., 2] + 50)
             assert mask.sum() > 30, f"probe {k} not visible"

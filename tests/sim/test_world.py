@@ -7,12 +7,19 @@ import numpy as np
 import pytest
 
 from lapwrench.sim.scene import SceneConfig
-from lapwrench.sim.world import SimulationUnstableError, SimWorld
+from lapwrench.sim.world import JointServoGains, SimulationUnstableError, SimWorld
 
 
 def _run(world: SimWorld, q_ref: np.ndarray, n: int) -> None:
     for _ in range(n):
         world.step(q_ref)
+
+
+def test_worlds_sharing_a_scene_keep_their_own_gains(panda_scene) -> None:
+    soft = JointServoGains(stiffness=(300.0,) * 7, damping=(10.0,) * 7)
+    a = SimWorld(panda_scene, gains=soft)
+    b = SimWorld(panda_scene)
+    assert a.model.actuator_gainprm[0, 0] == 300.0 and b.model.actuator_gainprm[0, 0] == 3000.0
 
 
 def test_timing(world: SimWorld) -> None:

@@ -17,6 +17,7 @@ After the substeps the forward dynamics is evaluated once more (``mj_forward``),
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -94,7 +95,8 @@ class SimWorld:
         if scene is None or isinstance(scene, SceneConfig):
             scene = build_scene(scene)
         self.scene = scene
-        self.model: mujoco.MjModel = scene.model
+        # Own copy: the servo gains are written into the model, and scenes may be shared.
+        self.model: mujoco.MjModel = copy.copy(scene.model)
         self.data = mujoco.MjData(self.model)
         self.gains = gains or JointServoGains()
         self.max_contact_force = float(max_contact_force)
