@@ -9,9 +9,9 @@ Base frame = MuJoCo world frame (the arm's root link sits at the origin).
 
 The world contains:
 
-- the laparoscope: 10 mm x 0.29 m shaft and a handle (visual geoms on the URDF bodies), a
-  contact capsule on the shaft, a camera at the tip with the paper's pinhole intrinsics
-  (image u along x_C, v along y_C, looking along +z_C, OpenCV convention) and a tip light;
+- the laparoscope: 10 mm x 0.29 m shaft and a handle (visual geoms on the URDF bodies), a camera
+  at the tip with the paper's pinhole intrinsics (image u along x_C, v along y_C, looking along
+  +z_C, OpenCV convention; checked by rendering to within 0.3 px) and a tip light;
 - an abdominal phantom (body ``housing``): a box shell on two horizontal spring-damper slides so a
   sustained lateral load displaces it (Fig. 5 disturbance), a body wall (visual mesh with holes),
   a textured tissue floor and organ, a suture needle and two gauze pads;
