@@ -1,0 +1,341 @@
+"""The safety supervisor: the last gate between the controller and the robot.
+
+Every joint position command passes through :meth:`SafetySupervisor.filter` before it is written.
+The supervisor is deliberately independent of the controller's
+:class:`~lapwrench.motion.reference_shaper.ReferenceShaper`: it re-derives velocity, acceleration
+and jerk from the history of the commands *it actually sent*, exactly as libfranka does
+(backward differences at the control period: ``v = Δq/dt``, ``a = Δv/dt``, ``j = Δa/dt``, from
+rest at the start pose), and checks them against the Franka limits. Then:
+
+* **Command validation.** A command that is not 7 finite numbers, leaves the joint position
+  limits, or breaks a velocity/acceleration/jerk limit is *replaced* by the next sample of a
+  jerk-limited stop, an event is logged and the supervisor latches into a stop with an alarm.
+  A controller that produced one bad command is not trusted for the next.
+* **RCM watch.** An RCM error above ``max_rcm_error`` → hold position (the same smooth,
+  jerk-limited stop) and raise the alarm.
+* **Joint limits.** A *measured* joint closer than ``joint_warn_margin`` to a limit logs an event;
+  closer than ``joint_stop_margin`` → stop and alarm (the shaper keeps the reference
+  ``position_margin`` inside, so this means the robot is not following).
+* **Deadlines.** A cycle whose compute time exceeds ``cycle_budget`` is a deadline miss (counted,
+  logged with rate limiting); ``max_consecutive_misses`` in a row → stop and alarm.
+* **Clean stop.** :meth:`stop` brings the reference to rest: each joint's acceleration is ramped
+  at most ``jerk·dt`` per cycle towards ``-sign(v)·min(a_max, a_ramp(v))``, ``a_ramp`` the largest
+  deceleration from which the acceleration can still be ramped back to zero in jerk steps exactly
+  when the velocity reaches zero (the discrete form of ``sqrt(2 j |v|)``), so velocity,
+  acceleration and jerk all stay inside the (scaled) limits and the stream ends at rest (constant
+  position). :attr:`at_rest` tells when the caller may
+  disconnect.
+
+Events are structured :class:`SupervisorEvent` (time, kind, message) and kept in
+:attr:`SafetySupervisor.events` (bounded) and :attr:`SafetySupervisor.pending` (drained by the
+logger each cycle).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from lapwrench.robot.limits import JointLimits
+from lapwrench.spatial import Vec
+
+
+class SupervisorState(StrEnum):
+    """``running``: commands pass; ``stopping``: braking to rest; ``holding``: at rest, holding."""
+
+    RUNNING = "running"
+    STOPPING = "stopping"
+    HOLDING = "holding"
+
+
+@dataclass(frozen=True)
+class SupervisorEvent:
+    """One supervisor event. ``time`` is the loop's session time (s)."""
+
+    time: float
+    kind: str
+    message: str
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """Supervisor thresholds.
+
+    Attributes:
+        check_fraction: Fraction of the Franka velocity/acceleration/jerk limits a command may use
+            (1.0: the hard limits; the controller's shaper uses ``robot.limit_fraction`` < 1).
+        stop_fraction: Fraction of the limits used by the stop trajectory.
+        position_tolerance: Slack (rad) on the position-limit check of commands.
+        max_rcm_error: RCM error (m) above which the robot holds position with an alarm.
+        joint_warn_margin: Measured distance (rad) to a joint limit that logs an event.
+        joint_stop_margin: Measured distance (rad) to a joint limit that stops with an alarm.
+        cycle_budget: Compute time (s) allowed per cycle; more is a deadline miss.
+        max_consecutive_misses: Deadline misses in a row that stop with an alarm (0: never).
+        rest_velocity: Velocity (rad/s) under which, with the acceleration ramped out, a stopping
+            reference counts as at rest.
+        max_events: Events kept in memory.
+    """
+
+    check_fraction: float = 1.0
+    stop_fraction: float = 0.9
+    position_tolerance: float = 1e-6
+    max_rcm_error: float = 0.01
+    joint_warn_margin: float = 0.04
+    joint_stop_margin: float = 0.01
+    cycle_budget: float = 0.0008
+    max_consecutive_misses: int = 20
+    rest_velocity: float = 1e-4
+    max_events: int = 10_000
+
+    def __post_init__(self) -> None:
+        for name in ("check_fraction", "stop_fraction", "max_rcm_error", "cycle_budget", "rest_velocity"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"supervisor.{name} must be positive, got {v!r}")
+        if self.check_fraction > 1.0 or self.stop_fraction > 1.0:
+            raise ValueError("supervisor check_fraction and stop_fraction must be <= 1")
+        if not 0 <= self.joint_stop_margin <= self.joint_warn_margin:
+            raise ValueError("need 0 <= joint_stop_margin <= joint_warn_margin")
+        if self.max_consecutive_misses < 0:
+            raise ValueError("max_consecutive_misses must be >= 0")
+
+
+def _rate_limited(count: int) -> bool:
+    """Log the first 10 occurrences, then every 1000th."""
+    return count <= 10 or count % 1000 == 0
+
+
+class SafetySupervisor:
+    """Validates, and if needed replaces, every command; watches RCM, joints and deadlines.
+
+    Args:
+        limits: The robot's joint limits (:attr:`lapwrench.robot.model.RobotModel.limits`).
+        dt: Control period (s).
+        config: Thresholds (:class:`SupervisorConfig`).
+    """
+
+    def __init__(self, limits: JointLimits, dt: float, config: SupervisorConfig | None = None) -> None:
+        self.cfg = config or SupervisorConfig()
+        self.dt = float(dt)
+        self.limits = limits
+        c = self.cfg
+        self._v_max = limits.velocity * c.check_fraction
+        self._a_max = limits.acceleration * c.check_fraction
+        self._j_max = limits.jerk * c.check_fraction
+        stop = limits.scaled(c.stop_fraction)
+        self._stop_a = stop.acceleration
+        self._stop_j = stop.jerk
+        self._lo = limits.position_lower
+        self._hi = limits.position_upper
+        self.events: deque[SupervisorEvent] = deque(maxlen=c.max_events)
+        self.pending: list[SupervisorEvent] = []
+        self.state = SupervisorState.HOLDING
+        self.alarm = False
+        self.alarm_reason: str | None = None
+        self.deadline_misses = 0
+        self.consecutive_misses = 0
+        self.replaced_commands = 0
+        self._counts: dict[str, int] = {}
+        self._joint_warned = False
+        self._q = np.zeros(7)
+        self._v = np.zeros(7)
+        self._a = np.zeros(7)
+        self._started = False
+
+    # -- state --------------------------------------------------------------------------------
+    def start(self, q0: Vec, time: float = 0.0) -> None:
+        """Start supervising from rest at ``q0`` (the robot's measured joints)."""
+        q0 = np.asarray(q0, dtype=float)
+        if q0.shape != (7,) or not np.all(np.isfinite(q0)):
+            raise ValueError("supervisor start pose must be 7 finite joint positions")
+        self._q, self._v, self._a = q0.copy(), np.zeros(7), np.zeros(7)
+        self.state = SupervisorState.RUNNING
+        self.alarm, self.alarm_reason = False, None
+        self.consecutive_misses = 0
+        self._started = True
+        self.event(time, "start", "supervision started at rest")
+
+    @property
+    def command_state(self) -> tuple[Vec, Vec, Vec]:
+        """(q, v, a) of the last command sent, as libfranka differentiates them (copies)."""
+        return self._q.copy(), self._v.copy(), self._a.copy()
+
+    @property
+    def at_rest(self) -> bool:
+        """True once a stop has completed (the reference is constant)."""
+        return self.state is SupervisorState.HOLDING
+
+    def event(self, time: float, kind: str, message: str) -> SupervisorEvent:
+        """Record an event."""
+        ev = SupervisorEvent(float(time), kind, message)
+        self.events.append(ev)
+        self.pending.append(ev)
+        return ev
+
+    def counted_event(self, time: float, kind: str, message: str) -> None:
+        """Record a repeated event, rate-limited (first 10, then every 1000th), counting all."""
+        n = self._counts.get(kind, 0) + 1
+        self._counts[kind] = n
+        if _rate_limited(n):
+            self.event(time, kind, f"{message} (occurrence {n})")
+
+    def drain_events(self) -> list[SupervisorEvent]:
+        """Events since the last call (for the logger)."""
+        out, self.pending = self.pending, []
+        return out
+
+    def raise_alarm(self, time: float, kind: str, message: str) -> None:
+        """Stop with an alarm (idempotent for the alarm reason: the first one is kept)."""
+        if not self.alarm:
+            self.alarm, self.alarm_reason = True, f"{kind}: {message}"
+        self.event(time, kind, message)
+        if self.state is SupervisorState.RUNNING:
+            self.state = SupervisorState.STOPPING
+            self.event(time, "stop", f"stopping ({kind})")
+
+    def stop(self, time: float, reason: str = "stop requested") -> None:
+        """Begin a clean stop to rest (no alarm). Keep calling :meth:`filter` until :attr:`at_rest`."""
+        if self.state is SupervisorState.RUNNING:
+            self.state = SupervisorState.STOPPING
+            self.event(time, "stop", reason)
+
+    # -- checks -------------------------------------------------------------------------------
+    def check_command(self, q_cmd: object) -> tuple[str, str] | None:
+        """(kind, message) if ``q_cmd`` is not a valid next command after the history, else None."""
+        try:
+            q = np.asarray(q_cmd, dtype=float)
+        except (TypeError, ValueError):
+            return "command_invalid", "command is not numeric"
+        if q.shape != (7,):
+            return "command_invalid", f"command has shape {q.shape}, expected (7,)"
+        if not np.all(np.isfinite(q)):
+            return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"
+        tol = self.cfg.position_tolerance
+        bad = np.flatnonzero((q < self._lo - tol) | (q > self._hi + tol))
+        if bad.size:
+            j = int(bad[0])
+            return "command_position", (
+                f"joint {j + 1} command {q[j]:.4f} rad outside [{self._lo[j]:.4f}, {self._hi[j]:.4f}]"
+            )
+        dt = self.dt
+        v = (q - self._q) / dt
+        a = (v - self._v) / dt
+        jk = (a - self._a) / dt
+        for kind, value, limit, unit in (
+            ("command_velocity", v, self._v_max, "rad/s"),
+            ("command_acceleration", a, self._a_max, "rad/s^2"),
+            ("command_jerk", jk, self._j_max, "rad/s^3"),
+        ):
+            ratio = np.abs(value) / limit
+            j = int(np.argmax(ratio))
+            if ratio[j] > 1.0 + 1e-9:
+                return kind, f"joint {j + 1} {kind.split('_')[1]} {value[j]:.4g} {unit} exceeds {limit[j]:.4g}"
+        return None
+
+    def _accept(self, q: Vec) -> None:
+        dt = self.dt
+        v = (q - self._q) / dt
+        self._a = (v - self._v) / dt
+        self._v = v
+        self._q = q.copy()
+
+    def _stop_step(self) -> Vec:
+        """Next sample of the jerk-limited stop from the current command state."""
+        dt = self.dt
+        v, a = self._v, self._a
+        jdt = self._stop_j * dt
+        # largest deceleration a after which ramping a back down in jerk steps (a - jdt, ..., 0)
+        # removes exactly the velocity left: |v| = dt a (a + jdt) / (2 jdt)
+        a_ramp = 0.5 * (np.sqrt(jdt * jdt + 8.0 * jdt * np.abs(v) / dt) - jdt)
+        target = -np.sign(v) * np.minimum(self._stop_a, a_ramp)
+        a_new = np.clip(target, a - jdt, a + jdt)
+        v_new = v + a_new * dt
+        # if this step would reverse the velocity, aim at zero instead (still within one jerk
+        # step of the previous acceleration; a remaining sliver is braked on the next cycles)
+        crossing = np.sign(v_new) * np.sign(v) < 0
+        if crossing.any():
+            a_new = np.where(crossing, np.clip(-v / dt, a - jdt, a + jdt), a_new)
+            v_new = v + a_new * dt
+        q_new = self._q + v_new * dt
+        self._a, self._v, self._q = a_new, v_new, q_new
+        if (
+            np.max(np.abs(v_new)) < self.cfg.rest_velocity
+            and np.max(np.abs(a_new)) <= np.min(jdt)
+        ):
+            # from here the position is held: libfranka then sees v -> 0 (a change of at most
+            # rest_velocity/dt in acceleration) and a -> 0 on the next cycle
+            self.state = SupervisorState.HOLDING
+        return self._q.copy()
+
+    # -- the gate -----------------------------------------------------------------------------
+    def filter(
+        self,
+        time: float,
+        q_cmd: object,
+        *,
+        rcm_error: float | None = None,
+        q_measured: Vec | None = None,
+        compute_time: float | None = None,
+    ) -> Vec:
+        """The command to send this cycle.
+
+        Args:
+            time: Session time (s), for events.
+            q_cmd: The controller's joint position reference.
+            rcm_error: The RCM error (m) to watch (the larger of the controller's and the
+                measured one, as the caller sees fit); None skips the check.
+            q_measured: The robot's measured joints; None skips the joint-limit watch.
+            compute_time: This cycle's compute time (s); None skips the deadline watch.
+        """
+        if not self._started:
+            raise RuntimeError("call SafetySupervisor.start(q0) before filter()")
+        c = self.cfg
+        if compute_time is not None:
+            if compute_time > c.cycle_budget:
+                self.deadline_misses += 1
+                self.consecutive_misses += 1
+                self.counted_event(
+                    time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
+                )
+                if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
+                    self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
+            else:
+                self.consecutive_misses = 0
+        rcm_bad = rcm_error is not None and (not math.isfinite(rcm_error) or rcm_error > c.max_rcm_error)
+        if rcm_bad and self.state is SupervisorState.RUNNING:
+            self.raise_alarm(
+                time, "rcm_error", f"RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm; holding"
+            )
+        if q_measured is not None:
+            qm = np.asarray(q_measured, dtype=float)
+            room = np.minimum(qm - self._lo, self._hi - qm)
+            j = int(np.argmin(room))
+            if room[j] < c.joint_stop_margin:
+                if self.state is SupervisorState.RUNNING:
+                    self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
+            elif room[j] < c.joint_warn_margin:
+                if not self._joint_warned:
+                    self.event(time, "joint_limit_near", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
+                    self._joint_warned = True
+            else:
+                self._joint_warned = False
+
+        if self.state is SupervisorState.HOLDING:
+            q = self._q.copy()
+            self._accept(q)
+            return q
+        if self.state is SupervisorState.STOPPING:
+            return self._stop_step()
+        problem = self.check_command(q_cmd)
+        if problem is None:
+            q = np.asarray(q_cmd, dtype=float)
+            self._accept(q)
+            return q.copy()
+        kind, message = problem
+        self.replaced_commands += 1
+        self.raise_alarm(time, kind, f"{message}; replaced by a stop")
+        return self._stop_step()
