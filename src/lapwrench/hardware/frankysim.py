@@ -31,6 +31,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -185,12 +186,21 @@ class FrankySimServer:
                 *done, buf = buf.split("\n")
                 lines.extend(done)
                 if any(READY in line for line in lines):
+                    threading.Thread(target=self._drain, args=(fd,), daemon=True).start()
                     return
             if self._proc.poll() is not None:
                 tail = "\n".join([*lines, buf][-20:])
                 raise FrankySimError(f"franky-sim exited with code {self._proc.returncode}:\n{tail}")
             time.sleep(0.05)
         raise FrankySimError(f"franky-sim did not become ready within {self.start_timeout:.0f} s")
+
+    @staticmethod
+    def _drain(fd: int) -> None:
+        """Keep reading the server's output so a chatty server never blocks on a full pipe."""
+        os.set_blocking(fd, True)
+        with contextlib.suppress(OSError, ValueError):
+            while os.read(fd, 65536):
+                pass
 
     def stop(self, timeout: float = 10.0) -> None:
         """Stop the server by its pid (SIGTERM, then SIGKILL), read its stats and release the lock."""
