@@ -1,0 +1,118 @@
+"""Helpers for the hardware-path tests (import as ``hardware.support``)."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lapwrench.config import Config
+from lapwrench.controller import Controller
+from lapwrench.drivers.buffer import LatestValue
+from lapwrench.drivers.ft import Wrench
+from lapwrench.drivers.tactile import TactileFrame
+from lapwrench.hardware.frankysim import frankysim_available
+from lapwrench.hardware.runner import ControlLoop, Sources
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+
+FRANKYSIM_MISSING = frankysim_available()
+
+
+class MemoryLogger:
+    """Duck-typed RunLogger keeping every cycle and event in memory."""
+
+    def __init__(self) -> None:
+        self.cycles: list[Any] = []
+        self.events: list[tuple[float, str, str]] = []
+
+    def cycle(self, record: Any) -> None:
+        self.cycles.append(record)
+
+    def event(self, time: float, kind: str, message: str) -> None:
+        self.events.append((time, kind, message))
+
+    def kinds(self) -> set[str]:
+        return {k for _, k, _ in self.events}
+
+
+@dataclass
+class ScriptedHand:
+    """Feeds F/T and tactile latest-value buffers from a thread (a simulated handle), on wall time.
+
+    ``force(t)`` is the hand force in {H}; ``grip(t)`` the tactile value of all 64 elements;
+    ``override(t)`` may return a raw (force, torque) to publish instead (fault injection) or
+    ``"silent"`` to publish nothing (a dead sensor).
+    """
+
+    force: Callable[[float], np.ndarray]
+    grip: Callable[[float], int] = lambda t: 40
+    override: Callable[[float], Any] | None = None
+    rate_hz: float = 500.0
+    ft: LatestValue[Any] = field(default_factory=lambda: LatestValue("ft"))
+    tactile: LatestValue[Any] = field(default_factory=lambda: LatestValue("tactile"))
+
+    def __post_init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self.t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self.t0
+
+    def start(self) -> ScriptedHand:
+        self.t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            t = self.now()
+            o = self.override(t) if self.override is not None else None
+            if o == "silent":
+                pass
+            elif o is not None:
+                self.ft.put(Wrench(np.asarray(o[0], float), np.asarray(o[1], float)))
+            else:
+                self.ft.put(Wrench(np.asarray(self.force(t), float), np.zeros(3)))
+            if o != "silent":
+                self.tactile.put(TactileFrame(np.full(64, self.grip(t), dtype=np.uint8)))
+            self._stop.wait(1.0 / self.rate_hz)
+
+    @property
+    def sources(self) -> Sources:
+        return Sources(ft=self.ft, tactile=self.tactile)
+
+
+def relaxed_supervisor_config(**kw: Any) -> SupervisorConfig:
+    """Supervisor for tests on this shared 2-core machine: deadline stop off unless asked.
+
+    Deadline misses are still counted; a python controller plus (for franky-sim) a python
+    simulator in another process share two cores with other jobs, so wall-clock compute time is
+    not a property of the code under test here. The deadline logic has its own tests.
+    """
+    kw.setdefault("max_consecutive_misses", 0)
+    return SupervisorConfig(**kw)
+
+
+def build_loop(
+    robot: Any, cfg: Config, hand: ScriptedHand | None, sup_cfg: SupervisorConfig | None = None, **kw: Any
+) -> tuple[ControlLoop, MemoryLogger]:
+    ctrl = Controller(cfg)
+    sup = SafetySupervisor(ctrl.model.limits, cfg.robot.dt, sup_cfg or relaxed_supervisor_config())
+    log = MemoryLogger()
+    loop = ControlLoop(robot, ctrl, sup, hand.sources if hand else Sources(), logger=log, **kw)  # type: ignore[arg-type]
+    return loop, log
+
+
