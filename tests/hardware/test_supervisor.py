@@ -1,0 +1,147 @@
+"""SafetySupervisor on its own: command checks as libfranka differentiates, watches, clean stop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState
+from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
+from lapwrench.robot.limits import limit_usage
+from lapwrench.robot.model import RobotModel
+from lapwrench.virtual import DEFAULT_Q0
+
+DT = 1e-3
+
+
+@pytest.fixture(scope="module")
+def limits():
+    return RobotModel("panda").limits
+
+
+def started(limits, **kw) -> SafetySupervisor:
+    s = SafetySupervisor(limits, DT, SupervisorConfig(**kw))
+    s.start(DEFAULT_Q0)
+    return s
+
+
+def run_to_rest(s: SafetySupervisor, q: np.ndarray, cmds: list[np.ndarray], limit: int = 5000) -> None:
+    n = 0
+    while not s.at_rest:
+        cmds.append(s.filter(0.0, q))
+        n += 1
+        assert n < limit
+    for _ in range(3):
+        cmds.append(s.filter(0.0, q))
+
+
+def test_valid_commands_pass_unchanged(limits) -> None:
+    s = started(limits)
+    q = DEFAULT_Q0.copy()
+    for k in range(50):
+        q = q + 1e-6 * k * np.ones(7)  # gentle ramp
+        out = s.filter(k * DT, q)
+        assert np.array_equal(out, q)
+    assert s.state is SupervisorState.RUNNING and not s.alarm
+
+
+@pytest.mark.parametrize(
+    ("bad", "kind"),
+    [
+        (np.full(7, np.nan), "command_nonfinite"),
+        (np.r_[np.inf, np.zeros(6)], "command_nonfinite"),
+        (np.zeros(6), "command_invalid"),
+        ("junk", "command_invalid"),
+        (DEFAULT_Q0 + np.r_[10.0, 0, 0, 0, 0, 0, 0], "command_position"),
+        (DEFAULT_Q0 + np.r_[0.01, 0, 0, 0, 0, 0, 0], "command_velocity"),  # 10 rad/s
+        (DEFAULT_Q0 + np.r_[1e-4, 0, 0, 0, 0, 0, 0], "command_acceleration"),  # 100 rad/s^2 from rest
+        (DEFAULT_Q0 + np.r_[1e-5, 0, 0, 0, 0, 0, 0], "command_jerk"),  # 10000 rad/s^3 > 7500
+    ],
+)
+def test_bad_command_is_replaced_by_a_stop(limits, bad, kind) -> None:
+    s = started(limits)
+    out = s.filter(0.1, bad)
+    assert np.all(np.isfinite(out)) and np.allclose(out, DEFAULT_Q0)
+    assert s.alarm and s.alarm_reason.startswith(kind), s.alarm_reason
+    assert any(e.kind == kind for e in s.events)
+    assert s.replaced_commands == 1
+
+
+def test_jerk_exactly_at_the_limit_passes(limits) -> None:
+    s = started(limits)
+    step = limits.jerk * DT**3  # q = j dt^3 from rest: v = j dt^2, a = j dt, jerk = j exactly
+    assert s.check_command(DEFAULT_Q0 + step * 0.999) is None
+    assert s.check_command(DEFAULT_Q0 + step * 1.01)[0] == "command_jerk"
+
+
+def test_rcm_error_over_bound_holds_with_alarm(limits) -> None:
+    s = started(limits, max_rcm_error=0.005)
+    out = s.filter(0.0, DEFAULT_Q0, rcm_error=0.004)
+    assert not s.alarm
+    s.filter(0.001, DEFAULT_Q0, rcm_error=0.006)
+    assert s.alarm and "rcm_error" in s.alarm_reason
+    assert s.at_rest  # from rest, the stop is immediate
+    assert np.allclose(s.filter(0.002, DEFAULT_Q0 + 0.1), out)  # further commands are ignored
+    s2 = started(limits)
+    s2.filter(0.0, DEFAULT_Q0, rcm_error=float("nan"))
+    assert s2.alarm
+
+
+def test_measured_joint_near_limit(limits) -> None:
+    s = started(limits, joint_warn_margin=0.05, joint_stop_margin=0.01)
+    near = DEFAULT_Q0.copy()
+    near[0] = limits.position_upper[0] - 0.03
+    s.filter(0.0, DEFAULT_Q0, q_measured=near)
+    assert not s.alarm and any(e.kind == "joint_limit_near" for e in s.events)
+    near[0] = limits.position_upper[0] - 0.005
+    s.filter(0.001, DEFAULT_Q0, q_measured=near)
+    assert s.alarm and "joint_limit" in s.alarm_reason
+
+
+def test_deadline_misses_counted_and_consecutive_ones_stop(limits) -> None:
+    s = started(limits, cycle_budget=0.0005, max_consecutive_misses=3)
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.0001)  # resets the run of misses
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    assert s.deadline_misses == 3 and not s.alarm
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    assert s.alarm and s.alarm_reason.startswith("deadline")
+
+
+@pytest.mark.parametrize("kind", ["panda", "fr3"])
+def test_clean_stop_reaches_rest_inside_the_limits(kind: str) -> None:
+    """From random moving states (full-speed shaped references), the stop ends at rest within limits."""
+    lim = RobotModel(kind).limits
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        s = SafetySupervisor(lim, DT, SupervisorConfig(max_consecutive_misses=0))
+        s.start(DEFAULT_Q0)
+        shaper = ReferenceShaper(lim, DT, 0.9, 0.05)
+        st = ReferenceState(DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7))
+        target = rng.uniform(-1, 1, 7) * lim.velocity
+        cmds = []
+        for _k in range(int(rng.integers(1, 600))):
+            st = shaper.step(st, target)
+            cmds.append(s.filter(0.0, st.q))
+        assert not s.alarm
+        s.stop(0.0)
+        run_to_rest(s, st.q, cmds)
+        usage = limit_usage(np.array(cmds), DT, lim, DEFAULT_Q0)
+        assert usage["velocity"] <= 1 and usage["acceleration"] <= 1 and usage["jerk"] <= 1, usage
+        assert np.allclose(cmds[-1], cmds[-2]) and np.allclose(cmds[-2], cmds[-3])
+        _q, v, a = s.command_state
+        assert np.allclose(v, 0) and np.allclose(a, 0)
+
+
+def test_filter_before_start_is_an_error(limits) -> None:
+    with pytest.raises(RuntimeError):
+        SafetySupervisor(limits, DT).filter(0.0, DEFAULT_Q0)
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ValueError):
+        SupervisorConfig(check_fraction=1.5)
+    with pytest.raises(ValueError):
+        SupervisorConfig(joint_stop_margin=0.1, joint_warn_margin=0.05)
