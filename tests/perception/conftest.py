@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+
+# Headless MuJoCo rendering (dataset and shipped-model tests); must precede any mujoco import.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
