@@ -57,6 +57,9 @@ class ClassicalParams:
             Thresholds in pixels (``open_px``, ``close_px``, ``border_px``) apply at work scale.
         max_instruments_per_component: at most this many straight bands split from one blob.
         ransac_hypotheses: line hypotheses per band when splitting crossing instruments.
+        box: ``"instrument"`` reports the box of shaft + jaws; ``"jaws"`` the box of the jaws
+            touching the shaft only (the tip region, as the simulator dataset labels it;
+            instruments with no jaws found are then not reported).
     """
 
     shaft_max_value: int = 115
@@ -74,6 +77,11 @@ class ClassicalParams:
     work_scale: float = 0.5
     max_instruments_per_component: int = 3
     ransac_hypotheses: int = 64
+    box: str = "instrument"
+
+    def __post_init__(self) -> None:
+        if self.box not in ("instrument", "jaws"):
+            raise ValueError(f"box must be 'instrument' or 'jaws', got {self.box!r}")
 
 
 class ClassicalDetector:
@@ -157,9 +165,12 @@ class ClassicalDetector:
                 assert jaw_stats is not None
                 jaw_pts = self._touching_jaws(pts, len(pts), jaw_labels, jaw_stats)
                 all_pts = np.vstack([pts, jaw_pts]) if jaw_pts is not None else pts
+                if p.box == "jaws" and jaw_pts is None:
+                    continue
                 tip = self._tip(all_pts, mean, evecs[:, 1], (ws, hs), jaw_pts)
-                bx0, by0 = all_pts.min(axis=0)
-                bx1, by1 = all_pts.max(axis=0) + 1.0
+                box_pts = jaw_pts if p.box == "jaws" else all_pts
+                bx0, by0 = box_pts.min(axis=0)
+                bx1, by1 = box_pts.max(axis=0) + 1.0
                 boxes.append((bx0 / scale, by0 / scale, bx1 / scale, by1 / scale))
                 tips.append((float(tip[0]) / scale, float(tip[1]) / scale))
                 shape_score = min(1.0, (elong - p.min_elongation) / p.min_elongation)
