@@ -3,13 +3,10 @@
 :func:`calibrate_from_images` finds the inner corners of a planar checkerboard in each view
 (``cv2.findChessboardCorners`` + ``cv2.cornerSubPix``) and solves for the pinhole intrinsics and
 the plumb-bob distortion with ``cv2.calibrateCamera``. :func:`write_intrinsics_yaml` writes the
-result in the layout the controller reads::
-
-    camera: {width, height, fx, fy, u0, v0}
-    calibration:
-      distortion: {model: plumb_bob, k1, k2, p1, p2, k3}
-      rms_reprojection_error_px: ...
-      ...
+result: the ``camera: {width, height, fx, fy, u0, v0}`` section the controller's configuration
+reads, and a ``calibration:`` section (plumb-bob distortion, RMS reprojection error, views). With
+``split=True`` the two go to separate files, ``intrinsics.yaml`` (``camera:`` only, loadable by
+``lapwrench.config.load``) and ``intrinsics.calibration.yaml``.
 """
 
 from __future__ import annotations
@@ -205,25 +202,61 @@ def calibrate_from_images(
     )
 
 
-def write_intrinsics_yaml(result: CalibrationResult, path: str | os.PathLike[str]) -> Path:
-    """Write the intrinsics YAML (``camera`` section + ``calibration`` details) and return its path."""
+def write_intrinsics_yaml(
+    result: CalibrationResult, path: str | os.PathLike[str], *, split: bool = False
+) -> Any:
+    """Write the intrinsics YAML and return its path.
+
+    With ``split=False`` one file holds the ``camera`` section and the ``calibration`` details.
+    With ``split=True`` (what the ``calibrate`` command writes) ``path`` holds only the ``camera``
+    section, so :func:`lapwrench.config.load` accepts it as a configuration file (it rejects unknown
+    top-level keys), and the details go to ``<stem>.calibration.yaml`` beside it; the return value
+    is then ``(camera_path, details_path)``. :func:`read_intrinsics_yaml` reads either form.
+    """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     header = (
         "# Camera intrinsics estimated by lapwrench (Zhang's method).\n"
         f"# RMS reprojection error {result.rms:.4f} px over {len(result.used)} views.\n"
     )
-    out.write_text(header + yaml.safe_dump(result.to_dict(), sort_keys=False))
-    return out
+    data = result.to_dict()
+    if not split:
+        out.write_text(header + yaml.safe_dump(data, sort_keys=False))
+        return out
+    details = calibration_details_path(out)
+    out.write_text(header + f"# Distortion and per-view details: {details.name}\n"
+                   + yaml.safe_dump({"camera": data["camera"]}, sort_keys=False))
+    details.write_text(header + yaml.safe_dump({"calibration": data["calibration"]}, sort_keys=False))
+    return out, details
+
+
+def calibration_details_path(path: str | os.PathLike[str]) -> Path:
+    """``<stem>.calibration.yaml`` beside an intrinsics YAML."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}.calibration.yaml")
 
 
 def read_intrinsics_yaml(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Read an intrinsics YAML back as a mapping (``camera`` section required)."""
+    """Read an intrinsics YAML back as a mapping (``camera`` section required).
+
+    A ``calibration`` section is taken from the file itself or, when absent, from the
+    ``<stem>.calibration.yaml`` file beside it (the split form written by ``calibrate``).
+    """
     p = Path(path)
-    data = yaml.safe_load(p.read_text())
+    if not p.is_file():
+        raise CalibrationError(f"{p}: intrinsics file not found")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise CalibrationError(f"{p}: not valid YAML: {exc}") from exc
     if not isinstance(data, dict) or not isinstance(data.get("camera"), dict):
         raise CalibrationError(f"{p}: no 'camera' section")
     missing = {"width", "height", "fx", "fy", "u0", "v0"} - set(data["camera"])
     if missing:
         raise CalibrationError(f"{p}: camera section lacks {sorted(missing)}")
+    details = calibration_details_path(p)
+    if "calibration" not in data and details.is_file():
+        extra = yaml.safe_load(details.read_text())
+        if isinstance(extra, dict) and isinstance(extra.get("calibration"), dict):
+            data["calibration"] = extra["calibration"]
     return data
