@@ -5,7 +5,21 @@ The paper tracks instruments with a YOLOv7 detector (Sec. II-A, IV); each detect
 :class:`Detector` protocol: ``detect(image) -> list[Detection]``. Build one with
 :func:`make_detector` (``"classical"``, a ``.onnx`` file or a ``.pt`` file).
 
-The ultralytics backend and the ONNX test-model builders import their optional packages lazily.
+Also here:
+
+- :mod:`~lapwrench.perception.dataset`: the synthetic YOLO dataset rendered by the simulator
+  (:func:`generate_dataset`), labels from MuJoCo segmentation of the instrument jaws;
+- :mod:`~lapwrench.perception.evaluate`: mAP50 / recall / precision of any detector on a YOLO split
+  (:func:`evaluate_detector`);
+- :mod:`~lapwrench.perception.async_detect`: detection at 25 fps with modelled latency for the 1 kHz
+  loop (:class:`SimulatedAsyncDetector`, :class:`ThreadedAsyncDetector`);
+- :mod:`~lapwrench.perception.train` (training venv only) and :mod:`~lapwrench.perception.cli`
+  (``dataset_main``, ``train_main``, ``calibrate_main``).
+
+The shipped model is ``models/instruments.onnx`` (:data:`SHIPPED_MODEL` when run from a checkout).
+
+The ultralytics backend, the training code and the ONNX test-model builders import their optional
+packages lazily; MuJoCo is imported only when a dataset is rendered.
 """
 
 from __future__ import annotations
@@ -14,6 +28,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from lapwrench.perception.async_detect import SimulatedAsyncDetector, ThreadedAsyncDetector, TimedDetections
 from lapwrench.perception.boxes import Letterbox, letterbox, nms
 from lapwrench.perception.calibration import (
     CalibrationError,
@@ -23,6 +38,7 @@ from lapwrench.perception.calibration import (
     write_intrinsics_yaml,
 )
 from lapwrench.perception.classical import ClassicalDetector, ClassicalParams
+from lapwrench.perception.dataset import CLASS_NAMES, DatasetConfig, generate_dataset
 from lapwrench.perception.detection import (
     BackendUnavailableError,
     Detection,
@@ -35,28 +51,42 @@ from lapwrench.perception.detection import (
     TrackingPointRule,
     validate_frame,
 )
+from lapwrench.perception.evaluate import EvalResult, evaluate_detector, evaluate_predictions
 from lapwrench.perception.onnx_yolo import OnnxYoloDetector, OutputLayout, infer_layout
 from lapwrench.perception.ultralytics_backend import UltralyticsDetector
 
+SHIPPED_MODEL = Path(__file__).resolve().parents[3] / "models" / "instruments.onnx"
+"""The trained model shipped in the repository (exists in a source checkout / editable install)."""
+
 __all__ = [
+    "CLASS_NAMES",
+    "SHIPPED_MODEL",
     "BackendUnavailableError",
     "CalibrationError",
     "CalibrationResult",
     "ClassicalDetector",
     "ClassicalParams",
+    "DatasetConfig",
     "Detection",
     "Detector",
     "DetectorConfig",
+    "EvalResult",
     "FrameError",
     "Letterbox",
     "ModelError",
     "OnnxYoloDetector",
     "OutputLayout",
     "PerceptionError",
+    "SimulatedAsyncDetector",
+    "ThreadedAsyncDetector",
+    "TimedDetections",
     "TrackingPoint",
     "TrackingPointRule",
     "UltralyticsDetector",
     "calibrate_from_images",
+    "evaluate_detector",
+    "evaluate_predictions",
+    "generate_dataset",
     "infer_layout",
     "letterbox",
     "make_detector",
