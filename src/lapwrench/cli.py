@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -64,7 +65,11 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     bar = tqdm(total=steps, desc="virtual closed loop", unit="tick", mininterval=0.5, disable=args.quiet)
     t0 = time.perf_counter()
     ctrl, log = run_virtual(
-        cfg, duration, HandScript(force=hand_force, delta=grip), instrument, controller=ctrl,
+        cfg,
+        duration,
+        HandScript(force=hand_force, delta=grip),
+        instrument,
+        controller=ctrl,
         progress=lambda k, n: bar.update(1),
     )
     bar.close()
@@ -94,27 +99,67 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job: the paper's experiments in the MuJoCo world, written to a report folder."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    from lapwrench.sim.demo import DemoError, plan_demo, run_demo
+
+    try:
+        plan = plan_demo(
+            args.out,
+            scenarios=args.scenarios,
+            config=args.config,
+            tracking_config=args.tracking_config,
+            seed=args.seed,
+            time_scale=args.time_scale,
+            video=not args.no_video,
+        )
+        results = run_demo(plan, progress=not args.quiet)
+    except DemoError as exc:
+        print(f"lapwrench: {exc}", file=sys.stderr)
+        return 1
+    for name, res in results.items():
+        print(f"{name}: " + ", ".join(f"{r.label}: RCM max {r.metrics['rcm_error_max_mm']:.2f} mm" for r in res.runs))
+    print(f"report: {Path(args.out) / 'report.md'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="lapwrench", description=__doc__)
+    p = argparse.ArgumentParser(prog="lapwrench", description="Laparoscope-holding robot control (unified wrenches).")
     sub = p.add_subparsers(dest="command", required=True)
-    for name, helptext in (
-        ("demo", "the main job: headless closed-loop runs that write a report folder"),
-        ("virtual", "closed loop on the controller's own virtual dynamics (no physics)"),
-    ):
-        s = sub.add_parser(name, help=helptext)
-        s.add_argument("--config", help="YAML configuration (default: the paper's parameters)")
-        s.add_argument("--out", default="reports/latest", help="report folder")
-        s.add_argument("--duration", type=float, default=20.0, help="seconds of robot time")
-        s.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    demo = sub.add_parser("demo", help="the main job: the paper's experiments in simulation, written to a report")
+    demo.add_argument("--out", default="reports/latest", help="report folder (default reports/latest)")
+    demo.add_argument(
+        "--scenarios", nargs="+", metavar="NAME", help="grip, rcm-disturbance, needle-search, workflow (default: all)"
+    )
+    demo.add_argument("--config", help="YAML configuration or preset for every scenario (default: the paper's)")
+    demo.add_argument("--tracking-config", help="configuration for needle-search and workflow")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--time-scale", type=float, default=1.0, help="shorten the scenarios (0.05-1)")
+    demo.add_argument("--no-video", action="store_true", help="skip the MP4s")
+    demo.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    virt = sub.add_parser("virtual", help="closed loop on the controller's own virtual dynamics (no physics)")
+    virt.add_argument("--config", help="YAML configuration or preset (default: the paper's parameters)")
+    virt.add_argument("--out", default="reports/virtual", help="report folder")
+    virt.add_argument("--duration", type=float, default=20.0, help="seconds of robot time")
+    virt.add_argument("--quiet", action="store_true", help="no progress bar")
+    from lapwrench.hardware import cli as hardware_cli
+
+    run = sub.add_parser("run", help="run the system on a Franka (or --dry-run on the simulated robot)")
+    hardware_cli.add_run_arguments(run)
+    run.set_defaults(func=hardware_cli.run_main)
+    rep = sub.add_parser("log-report", help="turn an MCAP run log into plots")
+    hardware_cli.add_log_report_arguments(rep)
+    rep.set_defaults(func=hardware_cli.log_report_main)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.command in ("demo", "virtual"):
+    if args.command == "demo":
+        return cmd_demo(args)
+    if args.command == "virtual":
         return cmd_virtual(args)
-    return 2
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return int(args.func(args))

@@ -222,17 +222,28 @@ def to_dict(cfg: Config) -> dict[str, Any]:
     return dataclasses.asdict(cfg)
 
 
+def presets() -> list[str]:
+    """Names of the packaged presets (``data/presets/*.yaml``), usable wherever a config path is."""
+    folder = resources.files("lapwrench").joinpath("data/presets")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
 def load(path: str | Path | None = None) -> Config:
-    """Load a YAML configuration file; ``None`` gives the packaged defaults."""
+    """Load a YAML configuration file or a packaged preset name; ``None`` gives the defaults.
+
+    Keys missing from the file keep their defaults (the paper's parameters).
+    """
     if path is None:
         text = resources.files("lapwrench").joinpath("data/default.yaml").read_text()
         source = "default.yaml"
     else:
         p = Path(path)
+        if not p.is_file() and str(path) in presets():
+            p = Path(str(resources.files("lapwrench").joinpath(f"data/presets/{path}.yaml")))
         if not p.is_file():
-            raise ConfigError(f"config file not found: {p}")
+            raise ConfigError(f"config file not found: {path} (presets: {', '.join(presets())})")
         text = p.read_text()
-        source = str(p)
+        source = str(path)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -5,16 +5,14 @@ Franka, so the hardware loop runs on either unchanged.
 External force estimate
 -----------------------
 A Franka does not measure the force on its end effector: it estimates it from the joint torque
-sensors, ``tau_ext = tau_model(q, dq, ddq) - tau_J`` mapped through the end-effector Jacobian.
-:class:`SimRobot` does the same, never reading the simulator's ground truth:
+sensors. :class:`SimRobot` does the same, never reading the simulator's ground truth:
 
 1. ``tau_J`` is the simulated link-side joint torque (what the Franka's sensors measure) plus a
    configurable constant bias and Gaussian noise;
-2. ``ddq`` is the finite difference of the measured joint velocities;
-3. ``tau_ext = M(q) ddq + c(q, dq) + g(q) - tau_J`` with the controller's Pinocchio model (which
-   includes the laparoscope, i.e. a correctly identified load), low-pass filtered;
-4. the wrench on the end effector is the damped least-squares solution of ``J_E(q)^T W = tau_ext``
-   and ``external_force`` its force part: the total external force *on* the end effector in {B}
+2. a generalized-momentum observer (:class:`~lapwrench.sim.sensors.ExternalForceObserver`) with
+   the controller's Pinocchio model (which includes the laparoscope, i.e. a correctly identified
+   load) turns it into ``tau_ext`` and, through ``J_E(q)^T``, into the wrench on the end effector;
+3. ``external_force`` is its force part: the total external force *on* the end effector in {B}
    (hand + trocar), the convention of :class:`~lapwrench.sensors.RobotReading`.
 """
 
@@ -30,7 +28,8 @@ from lapwrench.robot.description import RobotKind
 from lapwrench.robot.interface import RobotError
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import RobotReading
-from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError, SimWorld
+from lapwrench.sim.sensors import ExternalForceObserver
+from lapwrench.sim.world import CONTROL_DT, SimWorld
 from lapwrench.spatial import Vec
 
 
@@ -41,14 +40,14 @@ class ForceEstimateConfig:
     Attributes:
         torque_noise: Standard deviation (N m) of white noise on each measured joint torque.
         torque_bias: Constant offset (N m) on the measured joint torques (7 values or one).
-        cutoff_hz: First-order low-pass cutoff on tau_ext (the Franka's estimate is filtered too).
+        observer_gain: Bandwidth (1/s) of the momentum observer (the Franka's estimate is filtered too).
         damping: Damping of the least-squares wrench solve (near singularities).
         seed: Noise generator seed.
     """
 
     torque_noise: float = 0.0
     torque_bias: tuple[float, ...] | float = 0.0
-    cutoff_hz: float = 30.0
+    observer_gain: float = 60.0
     damping: float = 1e-3
     seed: int = 0
 
@@ -91,12 +90,10 @@ class SimRobot:
         self._rng = np.random.default_rng(self.est.seed)
         bias = np.asarray(self.est.torque_bias, dtype=float)
         self._bias = np.broadcast_to(bias, (7,)).copy()
-        self._alpha = 1.0 - np.exp(-2.0 * np.pi * self.est.cutoff_hz * self.dt)
+        self.observer = ExternalForceObserver(self.model, self.est.observer_gain, self.est.damping)
         self.tau_J = np.zeros(7)
         self.robot_time = 0.0
         self._connected = False
-        self._dq_prev: Vec | None = None
-        self._tau_ext = np.zeros(7)
         self._next_wall = 0.0
 
     @property
@@ -111,15 +108,8 @@ class SimRobot:
         if self.est.torque_noise > 0:
             tau_J = tau_J + self._rng.normal(0.0, self.est.torque_noise, 7)
         self.tau_J = tau_J
-        ddq = np.zeros(7) if self._dq_prev is None else (dq - self._dq_prev) / self.dt
-        self._dq_prev = dq
-        kin = self.model.kinematics(q, dq)
-        tau_ext = kin.M @ ddq + kin.nle - tau_J
-        self._tau_ext += self._alpha * (tau_ext - self._tau_ext)
-        J = kin.J_E  # [angular; linear] at the {E} origin
-        lam = self.est.damping
-        W = np.linalg.solve(J @ J.T + lam * lam * np.eye(6), J @ self._tau_ext)
-        return RobotReading(q, dq, W[3:].copy(), self.robot_time)
+        force = self.observer.update(q, dq, tau_J, self.dt)
+        return RobotReading(q, dq, force, self.robot_time)
 
     # -- RobotInterface -----------------------------------------------------------------------
     def connect(self) -> RobotReading:
@@ -127,16 +117,10 @@ class SimRobot:
         if self.q0 is not None:
             self.world.reset(self.q0)
         self.robot_time = 0.0
-        self._dq_prev = None
-        self._tau_ext = np.zeros(7)
+        self.observer.reset()
         self._connected = True
         self._next_wall = time.perf_counter()
-        r = self._measure()
-        # start the filter at the static estimate instead of ramping up from zero
-        q, dq = self.world.q, self.world.dq
-        kin = self.model.kinematics(q, dq)
-        self._tau_ext = kin.nle - self.tau_J
-        return r
+        return self._measure()
 
     def read(self) -> RobotReading:
         """The state of this cycle (paced to the wall clock when ``realtime``)."""
@@ -159,10 +143,7 @@ class SimRobot:
             _, R_H = self.world.frame_pose("lap_H")
             f = np.asarray(self.hand_force_H(self.robot_time), dtype=float)
             self.world.set_hand_wrench(np.concatenate([R_H @ f, np.zeros(3)]))
-        try:
-            self.world.step(np.asarray(q_ref, dtype=float))
-        except SimulationUnstableError as exc:
-            raise RobotError(f"{self.device}: {exc}") from exc
+        self.world.step(np.asarray(q_ref, dtype=float))  # SimulationUnstableError is a RobotError
         self.robot_time += self.dt
 
     def disconnect(self) -> None:

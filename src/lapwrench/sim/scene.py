@@ -52,6 +52,8 @@ from lapwrench.robot.description import (
 )
 
 # Names other modules may rely on.
+FT_FORCE_SENSOR = "handle_ft_force"
+FT_TORQUE_SENSOR = "handle_ft_torque"
 CAMERA_NAME = "lap_camera"
 OVERVIEW_CAMERA_NAME = "overview"
 TROCAR_BODY = "trocar"
@@ -347,6 +349,11 @@ def _dress_scope(spec: mujoco.MjSpec, scope: ScopeGeometry, cam: CameraIntrinsic
     )
     spec.body(FRAME_E).add_site(name="lap_E_site", size=[0.004, 0, 0], group=4)
     spec.body(FRAME_H).add_site(name="lap_H_site", size=[0.004, 0, 0], group=4)
+    # The handle F/T sensor: the force/torque transmitted between the hand grip (lap_H) and the
+    # scope, in the lap_H frame (MuJoCo's force/torque sensors read the body-parent interaction).
+    ft = ((FT_FORCE_SENSOR, mujoco.mjtSensor.mjSENS_FORCE), (FT_TORQUE_SENSOR, mujoco.mjtSensor.mjSENS_TORQUE))
+    for name, kind in ft:
+        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname="lap_H_site")
 
 
 # --------------------------------------------------------------------------------------------

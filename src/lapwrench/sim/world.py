@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
+from lapwrench.robot.interface import RobotError
 from lapwrench.sim.scene import (
     CAMERA_NAME,
     HOUSING_BODY,
@@ -46,7 +47,7 @@ from lapwrench.sim.scene import (
 CONTROL_DT = 0.001
 
 
-class SimulationUnstableError(RuntimeError):
+class SimulationUnstableError(RobotError):
     """The simulation diverged. ``time`` (s) and ``quantity`` name what went wrong and when."""
 
     def __init__(self, time: float, quantity: str, value: float | str) -> None:

@@ -1,0 +1,232 @@
+"""``lapwrench demo``: run the paper's experiments headless and write a report folder.
+
+Folder contents: ``report.md`` (one page, each result beside the paper's), ``metrics.json``,
+PNG plots, MP4s of the laparoscope view, and ``configs/<scenario>.yaml`` with the seed in the
+metrics. Every input is checked before the first simulation step; a run that goes unstable
+stops with a message naming the time and the quantity, and leaves ``FAILED.txt`` instead of a
+report.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+
+from lapwrench import __version__
+from lapwrench import config as config_mod
+from lapwrench.sim import report
+from lapwrench.sim.loop import SafetyStopError
+from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions, ScenarioResult, needle_search
+from lapwrench.sim.world import SimulationUnstableError
+
+TRACKING_SCENARIOS = ("needle-search", "workflow")
+DEFAULT_TRACKING_PRESET = "swapped-damping"
+
+
+class DemoError(RuntimeError):
+    """A bad demo input, reported before any simulation starts."""
+
+
+@dataclass(frozen=True)
+class DemoPlan:
+    out: Path
+    scenarios: tuple[str, ...]
+    configs: dict[str, config_mod.Config]
+    config_sources: dict[str, str]
+    seed: int
+    time_scale: float
+    video: bool
+    printed_damping_check: bool
+
+
+def plan_demo(
+    out: str | Path,
+    scenarios: list[str] | None = None,
+    config: str | None = None,
+    tracking_config: str | None = None,
+    seed: int = 0,
+    time_scale: float = 1.0,
+    video: bool = True,
+    printed_damping_check: bool = True,
+) -> DemoPlan:
+    """Validate everything (names, configs, output folder) and return the plan."""
+    names = tuple(scenarios or SCENARIOS)
+    unknown = [n for n in names if n not in SCENARIOS]
+    if unknown:
+        raise DemoError(f"unknown scenario {', '.join(unknown)}; choose from {', '.join(SCENARIOS)}")
+    if not (0.05 <= time_scale <= 1.0):
+        raise DemoError(f"time scale must lie in [0.05, 1], got {time_scale}")
+    try:
+        base = config_mod.load(config)
+        tracking = config_mod.load(tracking_config or (config if config else DEFAULT_TRACKING_PRESET))
+    except config_mod.ConfigError as exc:
+        raise DemoError(str(exc)) from exc
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_text("ok")
+        probe.unlink()
+    except OSError as exc:
+        raise DemoError(f"report folder {out} is not writable: {exc}") from exc
+    configs, sources = {}, {}
+    for n in names:
+        use_tracking = n in TRACKING_SCENARIOS
+        configs[n] = tracking if use_tracking else base
+        sources[n] = (tracking_config or config or DEFAULT_TRACKING_PRESET) if use_tracking else (config or "defaults")
+    return DemoPlan(
+        out,
+        names,
+        configs,
+        sources,
+        seed,
+        time_scale,
+        video,
+        printed_damping_check and config is None and any(n in TRACKING_SCENARIOS for n in names),
+    )
+
+
+def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]:
+    from tqdm import tqdm
+
+    out = plan.out
+    for stale in ("report.md", "metrics.json", "FAILED.txt"):
+        (out / stale).unlink(missing_ok=True)
+    (out / "configs").mkdir(exist_ok=True)
+    for name, cfg in plan.configs.items():
+        config_mod.dump(cfg, out / "configs" / f"{name}.yaml")
+    total = sum(SIM_SECONDS[n] for n in plan.scenarios) * plan.time_scale
+    if plan.printed_damping_check:
+        total += 15.0 * plan.time_scale
+    bar = tqdm(
+        total=round(total, 1),
+        unit="sim s",
+        desc="lapwrench demo",
+        disable=not progress,
+        mininterval=1.0,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}{postfix}]",
+    )
+    results: dict[str, ScenarioResult] = {}
+    figures: dict[str, list[str]] = {}
+    t0 = time.perf_counter()
+    done = 0.0
+    opts_video = out if plan.video else None
+    try:
+        for name in plan.scenarios:
+            bar.set_postfix_str(name)
+            cap = done + SIM_SECONDS[name] * plan.time_scale
+            opts = ScenarioOptions(
+                seed=plan.seed,
+                time_scale=plan.time_scale,
+                progress=lambda dt, cap=cap: bar.update(max(0.0, min(dt, cap - bar.n))),
+                video_dir=opts_video if name in TRACKING_SCENARIOS else None,
+            )
+            res = SCENARIOS[name](plan.configs[name], opts)
+            done = cap
+            bar.update(max(0.0, done - bar.n))
+            results[name] = res
+            figures[name] = _plots(name, res, out, plan.configs[name])
+        check = None
+        if plan.printed_damping_check:
+            bar.set_postfix_str("needle-search, printed damping")
+            check = _printed_damping_check(plan, bar)
+    except (SimulationUnstableError, SafetyStopError) as exc:
+        bar.close()
+        msg = f"simulation of '{name}' stopped: {exc}. No report was written."
+        (out / "FAILED.txt").write_text(msg + "\n")
+        raise DemoError(msg) from exc
+    bar.close()
+    wall = time.perf_counter() - t0
+    meta = {
+        "lapwrench": __version__,
+        "mujoco": mujoco.__version__,
+        "python": platform.python_version(),
+        "seed": plan.seed,
+        "time_scale": plan.time_scale,
+        "robot": next(iter(plan.configs.values())).robot.kind,
+        "physics_dt_ms": 0.5,
+        "config_sources": plan.config_sources,
+        "wall_s": wall,
+        "sim_s": sum(sum(float(r.metrics["duration_s"]) for r in res.runs) for res in results.values()),
+        "instrument_source": _instrument_sources(results),
+        "printed_damping_check": check,
+        "notes": _notes(plan),
+    }
+    report.write_metrics(out, results, meta)
+    report.write_report(out, results, meta, figures)
+    return results
+
+
+def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
+    if name == "grip":
+        return report.plot_grip(res, out)
+    if name == "rcm-disturbance":
+        return report.plot_disturbance(res, out)
+    stem = name.replace("-", "_")
+    figs = report.plot_tracking_run(res, out, stem)
+    if res.frames:
+        figs.append(report.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
+    if (out / f"{name}.mp4").exists():
+        figs.append(f"{name}.mp4")
+    return figs
+
+
+def _printed_damping_check(plan: DemoPlan, bar: object) -> str:
+    """Needle search with the damping exactly as printed, to show why the tracking scenarios use
+    the exchanged coefficients."""
+    cfg = config_mod.load()
+    cap = bar.total  # type: ignore[attr-defined]
+    opts = ScenarioOptions(
+        seed=plan.seed,
+        time_scale=plan.time_scale,
+        progress=lambda dt: bar.update(max(0.0, min(dt, cap - bar.n))),  # type: ignore[attr-defined]
+    )
+    try:
+        res = needle_search(cfg, opts)
+    except SimulationUnstableError as exc:
+        return (
+            f"Needle search with the printed k_t = 150 N m s and k_f = 2 N s/m: the run stopped at "
+            f"t = {exc.time:.2f} s ({exc.quantity} = {exc.value}): the nearly undamped insertion axis let the "
+            "scope slide out of the trocar while the hand swept the view. The tracking scenarios above therefore "
+            "use the preset `swapped-damping` (k_t = 2, k_f = 150), every other parameter as printed."
+        )
+    m = res.metrics
+    return (
+        "Needle search with the printed damping completed: RCM max "
+        f"{m['rcm_error_max_mm']:.2f} mm, tracking error median {m.get('tracking_error_median_px')} px, "
+        f"insertion drift {m['insertion_drift_mm']:.1f} mm."
+    )
+
+
+def _instrument_sources(results: dict[str, ScenarioResult]) -> str:
+    names = {r.instrument_source for r in results.values() if r.instrument_source}
+    return ", ".join(sorted(names)) or "none (no tracking scenario run)"
+
+
+def _notes(plan: DemoPlan) -> list[str]:
+    return [
+        "grip and rcm-disturbance use every parameter of the paper's Sec. IV-A as printed.",
+        "needle-search and workflow use the same table with k_t and k_f exchanged (preset swapped-damping): "
+        "with the printed values a 10 N tracking force turns the view at ~0.2 deg/s and the insertion axis is "
+        "almost free (see the check below).",
+        "tracking.direction = image_plane (the text of eq 12); the printed eq 12 also retracts the scope.",
+        "The simulated surgeon: force-driven hand in grip (same effort at every grip), speed-driven hand "
+        "(0.25 rad/s) in the tracking scenarios.",
+        f"Simulation time scale {plan.time_scale} (1 = the paper's durations).",
+        f"Machine: {os.cpu_count()} CPUs; MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}; ffmpeg: "
+        f"{'yes' if shutil.which('ffmpeg') or _has_imageio_ffmpeg() else 'no'}.",
+    ]
+
+
+def _has_imageio_ffmpeg() -> bool:
+    try:
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        return False
+    return True

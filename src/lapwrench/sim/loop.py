@@ -1,0 +1,226 @@
+"""One closed loop in the simulated world: sensors → controller → robot, at 1 kHz.
+
+Everything the controller sees comes from a simulated sensor (F/T, tactile array, joint-torque
+based external force, camera). Instrument image points come from an :class:`InstrumentSource`:
+the perception pipeline on rendered frames, or — until a detector is configured — the projection
+of the simulator's known instrument geometry (reported as such).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from lapwrench.config import Config
+from lapwrench.controller import Controller, TickResult
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.robot.description import ScopeGeometry
+from lapwrench.robot.model import RobotModel
+from lapwrench.sensors import InstrumentObservation, RobotReading, SensorFrame
+from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
+from lapwrench.sim.scene import SceneConfig, build_scene
+from lapwrench.sim.sensors import (
+    SimCamera,
+    SimForceTorqueSensor,
+    TactileGripModel,
+)
+from lapwrench.sim.world import CONTROL_DT, SimWorld
+
+# Franka-like joint torque sensing imperfections behind the external force estimate.
+TORQUE_NOISE = 0.05  # N m, white
+TORQUE_BIAS = (0.08, -0.1, 0.05, 0.1, -0.02, 0.03, 0.01)  # N m
+
+
+class SafetyStopError(RuntimeError):
+    """The safety supervisor stopped the robot; ``time`` (s) and ``reason`` say when and why."""
+
+    def __init__(self, time: float, reason: object) -> None:
+        self.time = time
+        self.reason = reason
+        super().__init__(f"safety supervisor stopped the robot at t = {time:.3f} s: {reason}")
+
+
+class InstrumentSource(Protocol):
+    """Turns the latest camera frame into instrument image points."""
+
+    name: str
+    latency: float
+
+    def observe(self, world: SimWorld, frame: np.ndarray | None) -> np.ndarray: ...
+
+
+@dataclass
+class ProjectedInstruments:
+    """Ground-truth stand-in for a detector: the instrument tips projected through the camera.
+
+    Used only where no detector is configured; the report says so. Tips outside the image or
+    behind the camera are not detected.
+    """
+
+    width: int
+    height: int
+    latency: float = 0.04
+    name: str = "projected simulator geometry (no detector)"
+
+    def observe(self, world: SimWorld, frame: np.ndarray | None) -> np.ndarray:
+        tips = np.array([world.instrument_tip(i) for i in range(2)])
+        uv, depth = world.project_to_image(tips)
+        ok = (depth > 0.005) & (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
+        return uv[ok]
+
+
+@dataclass
+class Trace:
+    """Per-tick records of one run (lists while running, arrays after :meth:`finish`)."""
+
+    columns: dict[str, list] = field(default_factory=dict)
+
+    def add(self, **values: object) -> None:
+        for k, v in values.items():
+            self.columns.setdefault(k, []).append(v)
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return np.asarray(self.columns[key])
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.columns
+
+
+class ClosedLoop:
+    """The world, its sensors and the controller, stepped together."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        seed: int = 0,
+        *,
+        camera: bool = False,
+        instruments: InstrumentSource | None = None,
+        scene_config: SceneConfig | None = None,
+        on_frame: Callable[[np.ndarray, float, str], None] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.seed = seed
+        scope = ScopeGeometry(
+            length=cfg.scope.length,
+            handle_offset=cfg.scope.handle_offset,
+            oblique_angle_deg=cfg.scope.oblique_angle_deg,
+        )
+        sc = scene_config or SceneConfig(kind=cfg.robot.kind, scope=scope, rcm_lambda0=cfg.scope.lambda0)
+        self.world = SimWorld(build_scene(sc))
+        self.world.reset()
+        self.model = RobotModel(cfg.robot.kind, scope)
+        self.controller = Controller(cfg, self.model)
+        rng = np.random.SeedSequence(seed)
+        s_ft, s_tac, s_obs = (int(x.generate_state(1)[0]) for x in rng.spawn(3))
+        self.ft = SimForceTorqueSensor(self.world, seed=s_ft)
+        self.tactile = TactileGripModel(seed=s_tac)
+        self.robot = SimRobot(
+            self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=s_obs)
+        )
+        self.supervisor = SafetySupervisor(
+            self.model.limits,
+            CONTROL_DT,
+            SupervisorConfig(max_rcm_error=cfg.inputs.max_rcm_error, cycle_budget=1e9, max_consecutive_misses=0),
+        )
+        self.camera = SimCamera(self.world) if (camera or instruments is not None or on_frame) else None
+        self.instruments = instruments
+        self._pending: deque[tuple[float, float, np.ndarray]] = deque()
+        self._latest_obs: InstrumentObservation | None = None
+        self.on_frame = on_frame
+        self.last_mode = "idle"
+        self.ft.tare()
+        self._reading = self.robot.connect()
+        self.q0 = self._reading.q
+        self.controller.reset(self.q0)
+        self.supervisor.start(self.q0)
+        self.events: list[object] = []
+        self.t = 0.0
+
+    @property
+    def time(self) -> float:
+        return self.t
+
+    def _camera_step(self, t: float) -> None:
+        if self.camera is None or not self.camera.capture(t):
+            return
+        frame = self.camera.frame
+        if self.on_frame is not None:
+            self.on_frame(frame, t, self.last_mode)
+        if self.instruments is not None:
+            points = self.instruments.observe(self.world, frame)
+            self._pending.append((t + self.instruments.latency, t, points))
+
+    def _observation(self, t: float) -> InstrumentObservation | None:
+        while self._pending and self._pending[0][0] <= t + 1e-9:
+            _, stamp, points = self._pending.popleft()
+            self._latest_obs = InstrumentObservation(points, stamp)
+        return self._latest_obs
+
+    def step(self, grip_force: float, before_physics: Callable[[float], None] | None = None) -> TickResult:
+        """One 1 ms tick: sensors → controller → robot. The hand wrench must already be set."""
+        t = self.t
+        self._camera_step(t)
+        reading = self.robot.read() if t > 0.0 else self._reading
+        frame = SensorFrame(
+            time=t,
+            ft=self.ft.read(t),
+            tactile=self.tactile.read(t, grip_force),
+            instruments=self._observation(t),
+            robot=RobotReading(reading.q, reading.dq, reading.external_force, t),
+        )
+        result = self.controller.tick(frame)
+        self.last_mode = result.mode
+        q_cmd = self.supervisor.filter(t, result.q_ref, rcm_error=result.rcm_error, q_measured=reading.q)
+        self.events.extend(self.supervisor.drain_events())
+        if self.supervisor.alarm:
+            self._stop_to_rest()
+            raise SafetyStopError(t, self.supervisor.alarm_reason)
+        if before_physics is not None:
+            before_physics(t)
+        self.robot.command(q_cmd)
+        self.t = t + CONTROL_DT
+        return result
+
+    def _stop_to_rest(self) -> None:
+        """After an alarm: keep sending the supervisor's jerk-limited stop until the arm is at rest."""
+        for _ in range(10_000):
+            if self.supervisor.at_rest:
+                return
+            reading = self.robot.read()
+            self.robot.command(self.supervisor.filter(self.t, reading.q, q_measured=reading.q))
+            self.t += CONTROL_DT
+
+    def physical_rcm_error(self) -> float:
+        """Distance (m) from the unloaded incision point (where the wall would sit with no shaft
+        load) to the shaft axis: how far the scope drags the incision. The trocar's own position
+        always lies on the axis, so this is the physically meaningful RCM error."""
+        p, d = self.world.shaft_axis()
+        r = self.world.incision_rest_position() - p
+        return float(np.linalg.norm(r - (r @ d) * d))
+
+    def record(self, trace: Trace, res: TickResult, **extra: object) -> None:
+        w = self.world
+        p_E, d_z = w.shaft_axis()
+        trace.add(
+            t=res.time,
+            mode=res.mode,
+            delta=res.delta,
+            rcm_error_ctrl=res.rcm_error,
+            rcm_error_phys=self.physical_rcm_error(),
+            contact_force=w.contact_force(),
+            W_h=res.wrenches["interaction"],
+            W_c=res.wrenches["tracking"],
+            p_R=res.p_R,
+            incision=w.incision_position(),
+            p_E=p_E,
+            d_z=d_z,
+            q_ref=res.q_ref,
+            hand=w.hand_wrench(),
+            insertion_depth=w.insertion_depth(),
+            **extra,
+        )

@@ -1,0 +1,370 @@
+"""The paper's phantom experiments as reproducible closed-loop scenarios.
+
+- ``grip`` (Fig. 4): the same view adjustment at three grip levels (δ ≈ 2.0, 1.1, 0.3).
+- ``rcm-disturbance`` (Fig. 5): the incision housing is pushed 10 mm at t = 3.6 s, with and
+  without RCM adaptation.
+- ``needle-search`` (Fig. 6-7): tracking only → handle & tracking → handle dominant → tracking.
+- ``workflow`` (Fig. 9): handle manipulation and autonomous tracking alternate.
+
+Each returns a :class:`ScenarioResult` with its traces and metrics; durations scale with
+``time_scale`` for quick tests (the physics and the controller are unchanged).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lapwrench.config import Config
+from lapwrench.robot.limits import limit_usage
+from lapwrench.sim.loop import ClosedLoop, InstrumentSource, ProjectedInstruments, Trace
+from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, InstrumentPath, axis_angle, rotate_axis
+from lapwrench.sim.world import CONTROL_DT
+
+PAPER = {
+    "grip": {"delta": [2.01, 1.13, 0.28], "completion_s": [6.32, 11.0, 19.46]},
+    "rcm-disturbance": {"load_time_s": 3.6, "threshold_N": 5.0},
+}
+TISSUE_DEPTH = 0.145  # m below the incision (the phantom's tissue surface)
+
+
+@dataclass
+class Run:
+    label: str
+    trace: Trace
+    metrics: dict[str, float | str | None]
+
+
+@dataclass
+class ScenarioResult:
+    name: str
+    runs: list[Run]
+    metrics: dict[str, object]
+    frames: list[tuple[np.ndarray, str]] = field(default_factory=list)  # (frame, label) snapshots
+    instrument_source: str = ""
+
+
+@dataclass(frozen=True)
+class ScenarioOptions:
+    seed: int = 0
+    time_scale: float = 1.0
+    video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
+    progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
+    instrument_source: Callable[[Config], InstrumentSource] | None = None
+
+
+def _source(cfg: Config, opts: ScenarioOptions) -> InstrumentSource:
+    if opts.instrument_source is not None:
+        return opts.instrument_source(cfg)
+    return ProjectedInstruments(cfg.camera.width, cfg.camera.height)
+
+
+def _tissue_point(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
+    return loop.world.incision_rest_position() + np.array([x, y, -TISSUE_DEPTH])
+
+
+def _axis_toward(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
+    v = np.array([x, y, -TISSUE_DEPTH])
+    return v / np.linalg.norm(v)
+
+
+def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | None = None) -> dict:
+    """Physical metrics of one run."""
+    F = np.linalg.norm(trace["contact_force"], axis=1)
+    phys = trace["rcm_error_phys"] * 1e3
+    usage = limit_usage(trace["q_ref"], CONTROL_DT, loop.model.limits, loop.q0)
+    sim_time = float(trace["t"][-1] + CONTROL_DT)
+    m: dict[str, float | str | None] = {
+        "duration_s": sim_time,
+        "rcm_error_max_mm": float(phys.max()),
+        "rcm_error_rms_mm": float(np.sqrt(np.mean(phys**2))),
+        "rcm_controller_error_max_mm": float(trace["rcm_error_ctrl"].max() * 1e3),
+        "trocar_force_max_N": float(F.max()),
+        "trocar_time_above_5N_s": float(np.sum(F > 5.0) * CONTROL_DT),
+        "limit_velocity_usage": usage["velocity"],
+        "limit_acceleration_usage": usage["acceleration"],
+        "limit_jerk_usage": usage["jerk"],
+        "limit_position_excess": usage["position_excess"],
+        "references_inside_limits": bool(
+            max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1.0 and usage["position_excess"] == 0.0
+        ),
+        "real_time_factor": sim_time / wall if wall > 0 else None,
+        "insertion_drift_mm": float(np.ptp(trace["insertion_depth"]) * 1e3),
+    }
+    if "pixel_error" in trace:
+        px = trace["pixel_error"]
+        seen = px[np.isfinite(px)]
+        m["tracking_error_median_px"] = float(np.median(seen)) if seen.size else None
+        m["tracking_error_p90_px"] = float(np.percentile(seen, 90)) if seen.size else None
+        m["instrument_visible_fraction"] = float(seen.size / px.size)
+    return m
+
+
+def _pixel_error(loop: ClosedLoop, index: int) -> float:
+    uv, depth = loop.world.project_to_image(loop.world.instrument_tip(index)[None])
+    cam = loop.cfg.camera
+    u, v = uv[0]
+    if depth[0] <= 0 or not (0 <= u < cam.width and 0 <= v < cam.height):
+        return float("nan")
+    return float(math.hypot(u - cam.u0, v - cam.v0))
+
+
+def _park_instruments(loop: ClosedLoop) -> None:
+    """Instruments out of the view, resting against the wall near their ports."""
+    for i, (x, y) in enumerate([(0.03, 0.11), (0.03, -0.11)]):
+        loop.world.set_instrument_tip(i, _tissue_point(loop, x, y) + np.array([0, 0, 0.06]))
+
+
+# --------------------------------------------------------------------------- grip (Fig. 4)
+
+
+def grip(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+    """Same 10° view adjustment from the same pose at three grip forces; completion times.
+
+    ``time_scale`` < 1 shortens the adjustment to 10° x time_scale."""
+    runs = []
+    levels = [("high", 30.0), ("medium", 17.0), ("low", 5.0)]
+    limit = 60.0 * opts.time_scale
+    for label, grip_force in levels:
+        loop = ClosedLoop(cfg, seed=opts.seed)
+        _park_instruments(loop)
+        _, d0 = loop.world.shaft_axis()
+        hand = HandGuide(rotate_axis(d0, [1.0, 1.0, 0.0], 10.0 * opts.time_scale), grip_force=grip_force)
+        trace = Trace()
+        t0 = time.perf_counter()
+        while loop.t < limit and (hand.engaged or loop.t < (hand.done_time or 0) + 0.5):
+            g = hand.apply(loop.world, loop.t, CONTROL_DT)
+            res = loop.step(g)
+            loop.record(trace, res, view_error_deg=math.degrees(hand.remaining(loop.world)))
+            if opts.progress and round(loop.t * 1000) % 100 == 0:
+                opts.progress(0.1)
+        m = run_metrics(loop, trace, time.perf_counter() - t0)
+        delta = trace["delta"]
+        m["grip_force_N"] = grip_force
+        m["delta_mean"] = float(delta[delta > 0].mean()) if np.any(delta > 0) else 0.0
+        m["completion_time_s"] = hand.done_time
+        runs.append(Run(label, trace, m))
+    times = [r.metrics["completion_time_s"] for r in runs]
+    done = all(t is not None for t in times)
+    return ScenarioResult(
+        "grip",
+        runs,
+        {
+            "completion_time_s": times,
+            "delta_mean": [r.metrics["delta_mean"] for r in runs],
+            "completion_falls_as_delta_rises": bool(done and times[0] < times[1] < times[2]),
+            "paper": PAPER["grip"],
+        },
+    )
+
+
+# --------------------------------------------------------------------------- disturbance (Fig. 5)
+
+
+def rcm_disturbance(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+    """10 mm housing shift at t = 3.6 s with and without RCM adaptation; ΔF(t) both ways."""
+    runs = []
+    duration = max(6.0, 12.0 * opts.time_scale)
+    dist = HousingDisturbance(start=3.6, shift=(0.0, 0.01))
+    for label, enabled in (("with adaptation", True), ("without adaptation", False)):
+        loop = ClosedLoop(cfg.replace(adaptive_rcm={"enabled": enabled}), seed=opts.seed)
+        _park_instruments(loop)
+        trace = Trace()
+        t0 = time.perf_counter()
+        while loop.t < duration:
+            res = loop.step(0.0, before_physics=lambda t, loop=loop: dist.apply(loop.world, t))
+            loop.record(trace, res, residual_lateral=res.residual_lateral)
+            if opts.progress and round(loop.t * 1000) % 100 == 0:
+                opts.progress(0.1)
+        m = run_metrics(loop, trace, time.perf_counter() - t0)
+        F = np.linalg.norm(trace["contact_force"], axis=1)
+        t = trace["t"]
+        after = t >= dist.start
+        above = np.flatnonzero(after & (F > 5.0))
+        back = None
+        if above.size and F[-1] < 5.0:
+            back = float(t[above[-1]] + CONTROL_DT - dist.start)
+        m["force_back_below_5N_after_s"] = back
+        m["force_final_N"] = float(F[-1])
+        m["force_peak_after_load_N"] = float(F[after].max())
+        m["rcm_shift_mm"] = float(np.linalg.norm(trace["p_R"][-1] - trace["p_R"][0]) * 1e3)
+        runs.append(Run(label, trace, m))
+    w, wo = runs[0].metrics, runs[1].metrics
+    return ScenarioResult(
+        "rcm-disturbance",
+        runs,
+        {
+            "with_adaptation_back_below_5N_s": w["force_back_below_5N_after_s"],
+            "with_adaptation_final_N": w["force_final_N"],
+            "without_adaptation_final_N": wo["force_final_N"],
+            "target_met": bool(
+                w["force_back_below_5N_after_s"] is not None
+                and w["force_back_below_5N_after_s"] <= 3.0
+                and wo["force_final_N"] > 5.0
+            ),
+            "paper": PAPER["rcm-disturbance"],
+        },
+    )
+
+
+# --------------------------------------------------------------------------- needle search (Fig. 6-7)
+
+
+def _scripted_run(
+    name: str,
+    cfg: Config,
+    opts: ScenarioOptions,
+    duration: float,
+    script: Callable[[ClosedLoop, float], float],
+    track_index: int = 0,
+) -> ScenarioResult:
+    source = _source(cfg, opts)
+    snapshots: list[tuple[np.ndarray, str]] = []
+    writer = None
+    if opts.video_dir is not None:
+        from lapwrench.sim.report import VideoWriter
+
+        writer = VideoWriter(opts.video_dir / f"{name}.mp4", cfg)
+
+    def on_frame(frame: np.ndarray, t: float, mode: str) -> None:
+        label = f"t={t:5.2f} s  {mode}"
+        if writer is not None:
+            writer.add(frame, label)
+        if round(t / 0.04) % 50 == 0:  # every 2 s for the snapshot strip
+            snapshots.append((frame, label))
+
+    loop = ClosedLoop(cfg, seed=opts.seed, instruments=source, on_frame=on_frame)
+    trace = Trace()
+    t0 = time.perf_counter()
+    try:
+        while loop.t < duration:
+            grip_force = script(loop, loop.t)
+            res = loop.step(grip_force)
+            loop.record(trace, res, pixel_error=_pixel_error(loop, track_index))
+            if opts.progress and round(loop.t * 1000) % 100 == 0:
+                opts.progress(0.1)
+    finally:
+        if writer is not None:
+            writer.close()
+    m = run_metrics(loop, trace, time.perf_counter() - t0, track_index)
+    modes = list(trace["mode"])
+    timeline = []
+    for k, mode in enumerate(modes):
+        if not timeline or timeline[-1][1] != mode:
+            timeline.append((float(trace["t"][k]), mode))
+    m["mode_changes"] = len(timeline)
+    return ScenarioResult(
+        name,
+        [Run(name, trace, m)],
+        {"mode_timeline": timeline, **m},
+        frames=snapshots,
+        instrument_source=source.name,
+    )
+
+
+def needle_search(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+    """Tracking only (t0-t3) → handle & tracking (t3-t5) → handle dominant, search (t5-t7) →
+    release, tracking re-engages on the instrument brought to the needle (t7-t9)."""
+    s = opts.time_scale
+    needle = (-0.035, 0.05)
+    state: dict[str, object] = {}
+
+    def script(loop: ClosedLoop, t: float) -> float:
+        if "hand" not in state:
+            _, _d0 = loop.world.shaft_axis()
+            state["hand"] = HandGuide(
+                _axis_toward(loop, needle[0] + 0.004, needle[1] - 0.012),
+                grip_force=24.0,
+                max_force=15.0,
+                max_speed=0.25 / s,
+                tolerance_deg=1.5,
+            )
+            state["local"] = InstrumentPath(
+                _tissue_point(loop, 0, 0),
+                [(0.012, -0.004), (0.0, 0.008), (0.014, 0.006), (0.01, -0.006)],
+                speed=0.006 / s,
+            )
+            state["fetch"] = InstrumentPath(
+                _tissue_point(loop, 0, 0),
+                [(0.01, -0.006), (0.03, 0.01), (needle[0] + 0.012, needle[1] - 0.004)],
+                speed=0.012 / s,
+            )
+            loop.world.set_instrument_tip(1, _tissue_point(loop, 0.03, -0.11) + np.array([0, 0, 0.06]))
+        hand: HandGuide = state["hand"]  # type: ignore[assignment]
+        t3, t7 = 6.0 * s, state.get("t7")
+        if t7 is None:
+            loop.world.set_instrument_tip(0, state["local"].tip(t))  # type: ignore[attr-defined]
+        else:
+            loop.world.set_instrument_tip(0, state["fetch"].tip(t - t7))  # type: ignore[attr-defined]
+        if t < t3:
+            loop.world.set_hand_wrench(np.zeros(6))
+            return 0.0
+        grip_force = hand.apply(loop.world, t, CONTROL_DT)
+        if not hand.engaged and t7 is None:
+            state["t7"] = t
+        return grip_force
+
+    return _scripted_run("needle-search", cfg, opts, 26.0 * s, script)
+
+
+# --------------------------------------------------------------------------- workflow (Fig. 9)
+
+
+def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+    """Handle to the first gauze pad, tracking while it is picked up and the second one found,
+    handle again toward the gallbladder, tracking to the end (Fig. 9, 40 s)."""
+    s = opts.time_scale
+    gauze1, gauze2, organ = (0.05, 0.055), (-0.06, -0.05), (0.04, -0.03)
+    state: dict[str, object] = {}
+
+    def script(loop: ClosedLoop, t: float) -> float:
+        if not state:
+            state["hand1"] = HandGuide(
+                _axis_toward(loop, *gauze1), grip_force=30.0, max_force=15.0, max_speed=0.25 / s, tolerance_deg=1.5
+            )
+            state["hand2"] = HandGuide(
+                _axis_toward(loop, *organ), grip_force=30.0, max_force=15.0, max_speed=0.25 / s, tolerance_deg=1.5
+            )
+            state["tool"] = InstrumentPath(
+                _tissue_point(loop, 0, 0),
+                [
+                    (0.02, 0.02),
+                    (gauze1[0] - 0.005, gauze1[1] - 0.01),
+                    (0.03, 0.02),
+                    (0.0, -0.01),
+                    (gauze2[0] + 0.01, gauze2[1] + 0.01),
+                    (0.0, -0.02),
+                    (organ[0] - 0.005, organ[1]),
+                ],
+                speed=0.01,
+            )
+            loop.world.set_instrument_tip(1, _tissue_point(loop, 0.03, -0.11) + np.array([0, 0, 0.06]))
+        loop.world.set_instrument_tip(0, state["tool"].tip(max(0.0, t - 3.0 * s) / s))  # type: ignore[attr-defined]
+        h1: HandGuide = state["hand1"]  # type: ignore[assignment]
+        h2: HandGuide = state["hand2"]  # type: ignore[assignment]
+        if t < 13.0 * s and h1.engaged:
+            return h1.apply(loop.world, t, CONTROL_DT)
+        if 30.0 * s <= t and h2.engaged:
+            return h2.apply(loop.world, t, CONTROL_DT)
+        loop.world.set_hand_wrench(np.zeros(6))
+        return 0.0
+
+    return _scripted_run("workflow", cfg, opts, 40.0 * s, script)
+
+
+SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
+    "grip": grip,
+    "rcm-disturbance": rcm_disturbance,
+    "needle-search": needle_search,
+    "workflow": workflow,
+}
+SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0}
+
+
+def axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return math.degrees(axis_angle(a, b))
