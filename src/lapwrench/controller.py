@@ -47,14 +47,18 @@ def _norm(v: Vec) -> float:
     return math.sqrt(float(v @ v))
 
 
-def classify_mode(handle_force: float, tracking_force: float) -> Mode:
-    """The paper's modes (Sec. IV-D): which of W_h and W_c is active, and which dominates."""
-    h, c = handle_force > 1e-9, tracking_force > 1e-9
-    if h and c:
+def classify_mode(handle_engaged: bool, tracking_engaged: bool, handle_force: float, tracking_force: float) -> Mode:
+    """The paper's modes (Sec. IV-D, Fig. 7): which cues are engaged and which wrench dominates.
+
+    The handle is engaged while the grip gain δ is non-zero; tracking while instruments are
+    detected (even inside the dead zone, where W_c = 0). Both engaged: "handle-dominant" once
+    |F_h| exceeds |F_c| (the paper's t5), "handle+tracking" before.
+    """
+    if handle_engaged and tracking_engaged:
         return "handle-dominant" if handle_force > tracking_force else "handle+tracking"
-    if h:
+    if handle_engaged:
         return "handle"
-    return "tracking" if c else "idle"
+    return "tracking" if tracking_engaged else "idle"
 
 
 @dataclass(frozen=True)
@@ -190,7 +194,12 @@ class Controller:
             p_G=geo.p_G,
             delta=self.interaction.delta,
             contacts=self.interaction.contacts,
-            mode=classify_mode(F_h, F_c),
+            mode=classify_mode(
+                self.interaction.delta > 0.0 and inputs.ft is not None,
+                inputs.instruments is not None and len(inputs.instruments.points) > 0,
+                F_h,
+                F_c,
+            ),
             residual_lateral=residual_lateral,
             events=inputs.events,
         )

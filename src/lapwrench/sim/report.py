@@ -82,7 +82,7 @@ def plot_disturbance(res: ScenarioResult, out: Path) -> list[str]:
         seg = np.array([p, p + 290 * d])
         ax[1].plot(seg[:, 1], seg[:, 2], c, lw=2, label="initial axis" if c == "g" else "final axis")
     ax[1].set(xlabel="y (mm)", ylabel="z (mm)", title="scope axes and RCM point (Fig. 5b), with adaptation")
-    ax[1].axis("equal")
+    ax[1].set_xlim(inc[0, 1] - 15.0, inc[0, 1] + 25.0)
     ax[1].legend(fontsize=8)
     return [_save(fig, out / "rcm_disturbance.png")]
 

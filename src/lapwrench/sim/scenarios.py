@@ -281,7 +281,7 @@ def needle_search(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Sce
                 _axis_toward(loop, needle[0] + 0.004, needle[1] - 0.012),
                 grip_force=24.0,
                 max_force=15.0,
-                max_speed=0.25 / s,
+                max_speed=0.25,
                 tolerance_deg=1.5,
             )
             state["local"] = InstrumentPath(
@@ -325,10 +325,10 @@ def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Scenario
     def script(loop: ClosedLoop, t: float) -> float:
         if not state:
             state["hand1"] = HandGuide(
-                _axis_toward(loop, *gauze1), grip_force=30.0, max_force=15.0, max_speed=0.25 / s, tolerance_deg=1.5
+                _axis_toward(loop, *gauze1), grip_force=30.0, max_force=15.0, max_speed=0.25, tolerance_deg=1.5
             )
             state["hand2"] = HandGuide(
-                _axis_toward(loop, *organ), grip_force=30.0, max_force=15.0, max_speed=0.25 / s, tolerance_deg=1.5
+                _axis_toward(loop, *organ), grip_force=30.0, max_force=15.0, max_speed=0.25, tolerance_deg=1.5
             )
             state["tool"] = InstrumentPath(
                 _tissue_point(loop, 0, 0),
