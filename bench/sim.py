@@ -1,4 +1,7 @@
-"""Real-time factor of SimWorld.step at 1 kHz control, with and without 25 fps laparoscope rendering.
+"""Real-time factor of the simulation at 1 kHz control, with and without 25 fps laparoscope rendering.
+
+Two figures each: the physics alone (SimWorld.step with scripted references) and the whole closed
+loop (simulated sensors, the controller tick, the supervisor and the physics, as in the demo).
 
 Usage: MUJOCO_GL=egl python bench/sim.py [--seconds 5] [--kind panda]
 The last line printed is one JSON object with unit-suffixed keys.
@@ -43,6 +46,27 @@ def _run(world: SimWorld, seconds: float, render_fps: float | None) -> tuple[flo
     return time.perf_counter() - t_start, step_times, frames
 
 
+def _closed_loop(seconds: float, kind: str, render: bool) -> float:
+    """Wall time of ``seconds`` of the demo's closed loop (hand on the handle, instrument tracked)."""
+    from lapwrench.config import load
+    from lapwrench.sim.loop import ClosedLoop, ProjectedInstruments
+
+    cfg = load("swapped-damping").replace(robot={"kind": kind})
+    source = ProjectedInstruments(cfg.camera.width, cfg.camera.height) if render else None
+    loop = ClosedLoop(cfg, seed=0, instruments=source)
+    loop.world.set_instrument_tip(0, loop.world.incision_rest_position() + np.array([0.01, 0.0, -0.145]))
+    if render:
+        loop.world.render()
+    n = round(seconds / CONTROL_DT)
+    t_start = time.perf_counter()
+    for i in range(n):
+        loop.world.set_hand_wrench(np.array([1.0 * np.sin(i * 1e-3), 0.5, 0.0, 0.0, 0.0, 0.0]))
+        loop.step(30.0)
+    wall = time.perf_counter() - t_start
+    loop.world.close()
+    return wall
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per run")
@@ -62,6 +86,12 @@ def main() -> None:
     )
     render_ms = (wall_b - wall_a) / max(frames, 1) * 1e3
     world.close()
+    wall_c = _closed_loop(args.seconds, args.kind, render=False)
+    wall_d = _closed_loop(args.seconds, args.kind, render=True)
+    rtf_c, rtf_d = args.seconds / wall_c, args.seconds / wall_d
+    print(f"closed loop, no rendering     : real-time factor {rtf_c:.1f}x (sensors, controller, supervisor, physics)")
+    print(f"closed loop, 25 fps rendering : real-time factor {rtf_d:.1f}x")
+    print(f"ratio closed loop / physics alone (no rendering): {rtf_c / rtf_a:.2f}")
     result = {
         "robot": args.kind,
         "sim_seconds_s": args.seconds,
@@ -72,6 +102,8 @@ def main() -> None:
         "step_us_p50": round(float(np.percentile(steps, 50)) * 1e6, 1),
         "step_us_p99": round(float(np.percentile(steps, 99)) * 1e6, 1),
         "render_ms_per_frame": round(render_ms, 1),
+        "rtf_closed_loop_no_render_x": round(rtf_c, 2),
+        "rtf_closed_loop_render_25fps_x": round(rtf_d, 2),
     }
     print(json.dumps(result))
 

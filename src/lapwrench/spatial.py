@@ -18,7 +18,8 @@ Mat = NDArray[np.float64]
 
 def skew(v: Vec) -> Mat:
     """[v]x such that [v]x w = v x w."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    x, y, z = v.tolist()
+    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
 
 
 def wrench_transform(p_from: Vec, p_to: Vec) -> Mat:

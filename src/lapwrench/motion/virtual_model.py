@@ -35,14 +35,14 @@ def self_motion_damping(kin: Kinematics, Minv: Mat, rate: float) -> Mat:
 
     - J_E M⁻¹ B_s = 0: the torque produces no acceleration of {E}, the scope is not disturbed;
     - θ̇ᵀ B_s θ̇ = d ‖N_E θ̇‖²_M >= 0: it only dissipates, at rate d (1/s).
+
+    Computed as d (M - J_Eᵀ Λ_E J_E) with Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹, which equals d M N_E.
     """
     if rate == 0.0:
         return np.zeros_like(kin.M)
     J = kin.J_E
-    A = J @ Minv @ J.T
-    J_pinv = Minv @ J.T @ np.linalg.inv(A + 1e-9 * np.eye(6))
-    N_E = np.eye(J.shape[1]) - J_pinv @ J
-    return rate * kin.M @ N_E
+    A = J @ Minv @ J.T + 1e-9 * np.eye(6)
+    return rate * (kin.M - J.T @ np.linalg.solve(A, J))
 
 
 def euler_velocity_step(

@@ -73,6 +73,12 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads (default: %(default)s)")
     parser.add_argument("--export-hw", default="256x320",
                         help="ONNX input HEIGHTxWIDTH (default: %(default)s)")
+    parser.add_argument("--init-weights", default=None,
+                        help="start from an earlier run's weights (e.g. out/train/NAME/weights/best.pt)")
+    parser.add_argument("--lr0", type=float, default=None, help="initial learning rate (ultralytics default)")
+    parser.add_argument("--warmup-epochs", type=float, default=None, help="warm-up epochs (ultralytics default)")
+    parser.add_argument("--close-mosaic", type=int, default=10,
+                        help="final epochs without mosaic augmentation (default: %(default)s)")
     parser.add_argument("--ship", type=Path, default=None,
                         help="also copy the exported ONNX here (e.g. models/instruments.onnx)")
 
@@ -85,7 +91,8 @@ def train_main(args: argparse.Namespace) -> int:
         settings = TrainSettings(data=args.data, out_dir=args.out, name=args.name, scale=args.scale,
                                  imgsz=args.imgsz, epochs=args.epochs, batch=args.batch, seed=args.seed,
                                  workers=args.workers, export_hw=(h, w), threads=args.threads,
-                                 time_hours=args.time_hours)
+                                 time_hours=args.time_hours, init_weights=args.init_weights, lr0=args.lr0,
+                                 warmup_epochs=args.warmup_epochs, close_mosaic=args.close_mosaic)
         if not Path(args.data).is_file():
             print(f"error: {args.data} not found; generate the dataset first (dataset subcommand)", file=sys.stderr)
             return 2

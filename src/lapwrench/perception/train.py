@@ -127,6 +127,10 @@ class TrainSettings:
     export_hw: tuple[int, int] = (256, 320)
     threads: int = 2
     time_hours: float | None = None
+    init_weights: str | None = None
+    """Start from these weights (a previous run's ``best.pt``) instead of random initialisation."""
+    lr0: float | None = None
+    warmup_epochs: float | None = None
 
 
 @dataclass(frozen=True)
@@ -154,8 +158,10 @@ def train(settings: TrainSettings, config_dir: str | os.PathLike[str] = ".yolo-c
     t0 = time.perf_counter()
     out = Path(settings.out_dir).resolve()
     run_dir = out / settings.name
-    yaml_path = write_model_yaml(out / "model_yaml", settings.scale, nc=1)
-    model = YOLO(str(yaml_path))
+    if settings.init_weights:
+        model = YOLO(str(settings.init_weights))  # architecture and weights of an earlier run
+    else:
+        model = YOLO(str(write_model_yaml(out / "model_yaml", settings.scale, nc=1)))
     kwargs: dict[str, Any] = {
         "data": str(Path(settings.data).resolve()),
         "imgsz": settings.imgsz,
@@ -177,6 +183,10 @@ def train(settings: TrainSettings, config_dir: str | os.PathLike[str] = ".yolo-c
     }
     if settings.time_hours:
         kwargs["time"] = settings.time_hours
+    if settings.lr0 is not None:
+        kwargs["lr0"] = settings.lr0
+    if settings.warmup_epochs is not None:
+        kwargs["warmup_epochs"] = settings.warmup_epochs
     model.train(**kwargs)
     best = run_dir / "weights" / "best.pt"
     onnx_path = export_onnx(best, settings.export_hw)

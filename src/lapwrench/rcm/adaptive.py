@@ -13,6 +13,7 @@ the incision. (The Franka's ``O_F_ext_hat_K`` must be mapped to this convention 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +31,10 @@ def residual_force(F_s: Vec, F_m: Vec) -> Vec:
 def dead_zone_saturation(residual: Vec, cfg: AdaptiveRcmConfig) -> Vec:
     """Eqs (20)-(22), per axis: F_re = sgn(ΔF) Φ(|ΔF|), Φ the dead-zone / sine / saturation map."""
     return np.array(
-        [np.sign(x) * sine_ramp(abs(x), cfg.gamma1, cfg.gamma2, cfg.F_op, cfg.ramp) for x in residual]
+        [
+            math.copysign(sine_ramp(abs(x), cfg.gamma1, cfg.gamma2, cfg.F_op, cfg.ramp), x) if x else 0.0
+            for x in np.asarray(residual, dtype=float).tolist()
+        ]
     )
 
 
@@ -74,7 +78,7 @@ class AdaptiveRcm:
             return np.zeros(3)
         F_lat = np.zeros(3) if residual is None else lateral_component(P, dead_zone_saturation(residual, self.cfg))
         self.velocity = rcm_point_rate(F_lat, self.p_R, self.p_R_anchor, self.cfg.alpha, self.cfg.beta)
-        if np.linalg.norm(self.velocity) <= self.cfg.epsilon:  # eq (25)
+        if math.sqrt(self.velocity @ self.velocity) <= self.cfg.epsilon:  # eq (25)
             self.p_R_anchor = self.p_R.copy()  # eq (26)
             self.anchor_updates += 1
         self.p_R = self.p_R + dt * self.velocity

@@ -8,7 +8,6 @@ Jacobian), so nothing downstream calls Pinocchio again.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -30,7 +29,8 @@ class Kinematics:
     """Robot state and derived quantities at one instant, all in the base frame {B}.
 
     ``J_E`` is the geometric Jacobian of the {E} origin ordered ``[J_Ew; J_Ev]`` (eq 33).
-    ``d_z`` is the scope axis (eq 16) and ``P`` the projector orthogonal to it (eq 17).
+    ``d_z`` is the scope axis (eq 16) and ``P`` the projector orthogonal to it (eq 17), both
+    filled by :func:`scope_axis`.
     """
 
     q: Vec
@@ -45,22 +45,19 @@ class Kinematics:
     R_H: Mat
     p_C: Vec
     R_C: Mat
-
-    @cached_property
-    def d_z(self) -> Vec:
-        """Eq (16): d_z = R_E I_z, the laparoscope direction."""
-        return self.R_E[:, 2].copy()
-
-    @cached_property
-    def P(self) -> Mat:
-        """Eq (17): P = I3 - d_z d_z^T."""
-        d = self.d_z
-        return np.eye(3) - np.outer(d, d)
+    d_z: Vec
+    P: Mat
 
     @property
     def twist_E(self) -> Vec:
         """[angular; linear] velocity of {E} (eq 33)."""
         return self.J_E @ self.dq
+
+
+def scope_axis(R_E: Mat) -> tuple[Vec, Mat]:
+    """Eqs (16)-(17): d_z = R_E I_z (the laparoscope direction) and P = I3 - d_z d_zᵀ."""
+    d = R_E[:, 2].copy()
+    return d, np.eye(3) - np.outer(d, d)
 
 
 class RobotModel:
@@ -97,6 +94,8 @@ class RobotModel:
         oC = pin.updateFramePlacement(model, data, self.frame_C)
         J = pin.getFrameJacobian(model, data, self.frame_E, self._lwa)
         J_E = np.vstack([J[3:], J[:3]])
+        R_E = oE.rotation.copy()
+        d_z, P = scope_axis(R_E)
         return Kinematics(
             q=np.array(q, dtype=float),
             dq=np.array(dq, dtype=float),
@@ -104,12 +103,14 @@ class RobotModel:
             nle=data.nle.copy(),
             gravity=data.g.copy(),
             p_E=oE.translation.copy(),
-            R_E=oE.rotation.copy(),
+            R_E=R_E,
             J_E=J_E,
             p_H=oH.translation.copy(),
             R_H=oH.rotation.copy(),
             p_C=oC.translation.copy(),
             R_C=oC.rotation.copy(),
+            d_z=d_z,
+            P=P,
         )
 
     def mass_matrix_inverse(self, q: Vec) -> Mat:

@@ -159,6 +159,7 @@ class ExternalForceObserver:
         self._integral = np.zeros(7)
         self._p0: np.ndarray | None = None
         self._data = model.model.createData()
+        self._lower = np.tril_indices(7, -1)
 
     def reset(self) -> None:
         self.r = np.zeros(7)
@@ -168,8 +169,8 @@ class ExternalForceObserver:
     def update(self, q: np.ndarray, dq: np.ndarray, tau_J: np.ndarray, dt: float) -> np.ndarray:
         """Advance one tick with the measured joint torques; returns the external force (N, {B})."""
         m, d = self.model.model, self._data
-        M = pin.crba(m, d, q)
-        M = np.triu(M) + np.triu(M, 1).T
+        M = pin.crba(m, d, q).copy()
+        M[self._lower] = M.T[self._lower]
         p = M @ dq
         C = pin.computeCoriolisMatrix(m, d, q, dq)
         g = pin.computeGeneralizedGravity(m, d, q)
