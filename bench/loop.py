@@ -83,16 +83,8 @@ def main() -> int:
         server.stop()
     fs = server.stats
     res = {
-        "robot_time_s": round(stats.robot_time, 3),
-        "wall_time_s": round(stats.wall_time, 3),
-        "cycles": stats.cycles,
-        "cycle_p50_us": round(stats.percentile("cycle", 50), 1),
-        "cycle_p99_us": round(stats.percentile("cycle", 99), 1),
-        "compute_p50_us": round(stats.percentile("compute", 50), 1),
-        "compute_p99_us": round(stats.percentile("compute", 99), 1),
-        "deadline_misses": stats.deadline_misses,
+        **stats.summary(),
         "deadline_budget_us": a.budget_us,
-        "rcm_error_measured_max_mm": round(float(stats.rcm_error_measured.max()) * 1e3, 4),
         "frankysim_step_p50_us": None if fs is None else round(fs.p50_us, 1),
         "frankysim_step_p99_us": None if fs is None else round(fs.p99_us, 1),
         "frankysim_realtime_factor_x": None if fs is None else round(fs.realtime_factor, 3),

@@ -16,13 +16,9 @@ from lapwrench import config as config_mod
 
 def _writable_dir(path: Path) -> Path:
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        probe = path / ".write-test"
-        probe.write_text("ok")
-        probe.unlink()
+        return config_mod.ensure_writable_dir(path)
     except OSError as exc:
         raise SystemExit(f"lapwrench: report folder {path} is not writable: {exc}") from exc
-    return path
 
 
 def _load_config(path: str | None) -> config_mod.Config:

@@ -211,6 +211,16 @@ def _check_consistency(cfg: Config) -> None:
         raise ConfigError(f"config key 'robot.limit_fraction' must lie in (0, 1], got {cfg.robot.limit_fraction}")
 
 
+def ensure_writable_dir(path: str | Path) -> Path:
+    """Create ``path`` if needed and check that files can be written there (OSError if not)."""
+    out = Path(path)
+    out.mkdir(parents=True, exist_ok=True)
+    probe = out / ".write-test"
+    probe.write_text("ok")
+    probe.unlink()
+    return out
+
+
 def from_dict(data: dict[str, Any]) -> Config:
     """Validate a nested mapping and build a :class:`Config` (missing keys take the defaults)."""
     cfg = _build(Config, data, "")

@@ -292,20 +292,7 @@ def run_main(args: argparse.Namespace) -> int:
         devices.close()
         if logger is not None:
             logger.close()
-    summary = {
-        "robot_time_s": round(stats.robot_time, 3),
-        "wall_time_s": round(stats.wall_time, 3),
-        "cycles": stats.cycles,
-        "cycle_p50_us": round(stats.percentile("cycle", 50), 1),
-        "cycle_p99_us": round(stats.percentile("cycle", 99), 1),
-        "compute_p50_us": round(stats.percentile("compute", 50), 1),
-        "compute_p99_us": round(stats.percentile("compute", 99), 1),
-        "deadline_misses": stats.deadline_misses,
-        "rcm_error_measured_max_mm": round(float(stats.rcm_error_measured.max()) * 1e3, 3),
-        "alarm": stats.alarm,
-        "stopped_at_rest": stats.stopped_at_rest,
-        "log": args.log,
-    }
+    summary = {**stats.summary(), "log": args.log}
     print(json.dumps(summary))
     return 1 if stats.alarm else 0
 

@@ -151,6 +151,24 @@ class LoopStats:
         a = self.cycle_us if what == "cycle" else self.compute_us
         return float(np.percentile(a, p)) if a.size else float("nan")
 
+    def summary(self) -> dict[str, float | int | str | bool | None]:
+        """The run's figures with units in the key names (for the CLI and the loop benchmark)."""
+        return {
+            "robot_time_s": round(self.robot_time, 3),
+            "wall_time_s": round(self.wall_time, 3),
+            "cycles": self.cycles,
+            "cycle_p50_us": round(self.percentile("cycle", 50), 1),
+            "cycle_p99_us": round(self.percentile("cycle", 99), 1),
+            "compute_p50_us": round(self.percentile("compute", 50), 1),
+            "compute_p99_us": round(self.percentile("compute", 99), 1),
+            "deadline_misses": self.deadline_misses,
+            "rcm_error_measured_max_mm": round(float(self.rcm_error_measured.max()) * 1e3, 4)
+            if self.rcm_error_measured.size
+            else None,
+            "alarm": self.alarm,
+            "stopped_at_rest": self.stopped_at_rest,
+        }
+
 
 class _Growable:
     """Append-only float array without per-append allocation."""

@@ -67,12 +67,8 @@ def plan_demo(
         tracking = config_mod.load(tracking_config or (config if config else DEFAULT_TRACKING_PRESET))
     except config_mod.ConfigError as exc:
         raise DemoError(str(exc)) from exc
-    out = Path(out)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_text("ok")
-        probe.unlink()
+        out = config_mod.ensure_writable_dir(out)
     except OSError as exc:
         raise DemoError(f"report folder {out} is not writable: {exc}") from exc
     configs, sources = {}, {}
