@@ -81,7 +81,7 @@ def cmd_virtual(args: argparse.Namespace) -> int:
         "rcm_error_rms_mm": float(np.sqrt(np.mean(err**2))),
         "mode_time_s": {k: round(v, 3) for k, v in modes.items()},
         "limit_usage": usage,
-        "events": len(ctrl.events),
+        "events": dict(ctrl.event_counts),
         "wall_time_s": wall,
     }
     for k in range(0, len(log.results), round(2.0 / cfg.robot.dt)):

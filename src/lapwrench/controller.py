@@ -6,6 +6,7 @@ sensors → wrenches → task/null-space allocation → integration → limits �
 from __future__ import annotations
 
 import math
+from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -40,6 +41,7 @@ from lapwrench.spatial import Vec
 from lapwrench.wrenches import InteractionWrench, RcmWrench, TrackingWrench, ViscousWrench
 from lapwrench.wrenches.base import DampingSource, TaskGeometry, TickContext, WrenchSource
 
+MAX_KEPT_EVENTS = 10_000
 Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
 
 
@@ -117,7 +119,8 @@ class Controller:
         )
         self.ref: ReferenceState | None = None
         self.rcm: AdaptiveRcm | None = None
-        self.events: list[InputEvent] = []
+        self.events: deque[InputEvent] = deque(maxlen=MAX_KEPT_EVENTS)
+        self.event_counts: Counter[str] = Counter()
 
     # -- setup --------------------------------------------------------------------------------
     def reset(self, q0: Vec, p_R: Vec | None = None) -> None:
@@ -133,7 +136,8 @@ class Controller:
         if p_R is None:
             p_R = initial_rcm_point(kin, self.cfg.scope.length, self.cfg.scope.lambda0)
         self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
-        self.events = []
+        self.events.clear()
+        self.event_counts.clear()
 
     # -- the tick -----------------------------------------------------------------------------
     def tick(self, frame: SensorFrame) -> TickResult:
@@ -141,7 +145,7 @@ class Controller:
             raise RuntimeError("call Controller.reset(q0) before tick()")
         # 1. sensors: validate at the edge; kinematics at the reference (the virtual model's state)
         inputs = self.validator.validate(frame)
-        self.events.extend(inputs.events)
+        self._report(inputs.events)
         kin = self.model.kinematics(self.ref.q, self.ref.dq)
         Minv = self.model.mass_matrix_inverse(kin.q)
 
@@ -169,7 +173,7 @@ class Controller:
         # 6. integration of the virtual model
         damping = self._damping(geo, N_r) + B_self
         if not np.all(np.isfinite(tau)):
-            self.events.append(InputEvent(frame.time, "controller", "non-finite torque; braking"))
+            self._report([InputEvent(frame.time, "controller", "non-finite torque; braking")])
             tau = np.zeros(7)
         dq_next = euler_velocity_step(kin, tau, damping, self.dt, self.cfg.motion.integrator)
 
@@ -180,7 +184,7 @@ class Controller:
         wrenches.update({s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)})
         F_h, F_c = _norm(wrenches["interaction"][3:]), _norm(wrenches["tracking"][3:])
         if _norm(geo.e_R) > self.cfg.inputs.max_rcm_error:
-            self.events.append(InputEvent(frame.time, "rcm", f"RCM error {_norm(geo.e_R) * 1e3:.1f} mm"))
+            self._report([InputEvent(frame.time, "rcm", f"RCM error {_norm(geo.e_R) * 1e3:.1f} mm")])
         return TickResult(
             time=frame.time,
             q_ref=self.ref.q,
@@ -205,6 +209,12 @@ class Controller:
         )
 
     # -- pieces of the tick -------------------------------------------------------------------
+    def _report(self, events: list[InputEvent]) -> None:
+        """Keep the latest events (bounded) and count them all by source."""
+        for e in events:
+            self.events.append(e)
+            self.event_counts[e.source] += 1
+
     def _residual(self, kin: Kinematics, inputs: ValidInputs) -> Vec | None:
         """ΔF (eq 19) when both the F/T reading and the robot's force estimate are valid."""
         if inputs.ft is None or inputs.robot is None or inputs.robot.external_force is None:

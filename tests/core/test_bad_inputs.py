@@ -135,3 +135,16 @@ def test_reset_rejects_bad_configuration() -> None:
         ctrl.reset(np.full(7, NAN))
     with pytest.raises(ValueError, match="limits"):
         ctrl.reset(DEFAULT_Q0 + 5.0)
+
+
+def test_event_memory_is_bounded_but_every_event_is_counted() -> None:
+    from lapwrench.controller import MAX_KEPT_EVENTS
+
+    ctrl = Controller(load())
+    ctrl.reset(DEFAULT_Q0)
+    bad = TactileReading(np.full(64, NAN))
+    n = MAX_KEPT_EVENTS + 500
+    for k in range(n):
+        ctrl.tick(SensorFrame(k * 1e-3, tactile=bad))
+    assert len(ctrl.events) == MAX_KEPT_EVENTS
+    assert ctrl.event_counts["tactile"] == n
