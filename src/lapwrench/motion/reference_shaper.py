@@ -41,14 +41,14 @@ class ReferenceShaper:
         self.two_a_brake = self.lim.acceleration  # braking at half the acceleration limit
         self.jerk_step = self.lim.jerk * dt
         self.two_over_jerk = 2.0 / self.lim.jerk
+        self._toward = np.array([[1.0], [-1.0]])  # +dq eats the lower room, -dq the upper one
         self.clamped_ticks = 0
 
-    def _velocity_bounds(self, q: Vec) -> tuple[Vec, Vec]:
-        """Velocity band at q: the velocity limit, and the speed from which braking at a_brake stops
-        the joint at its position margin, v² = 2 a_brake (room to the limit)."""
-        v_hi = np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * np.maximum(self.q_hi - q, 0.0)))
-        v_lo = -np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * np.maximum(q - self.q_lo, 0.0)))
-        return v_lo, v_hi
+    def _braking_speeds(self, q: Vec) -> Vec:
+        """Largest speeds (2 x n: toward the lower, toward the upper limit) at q: the velocity limit,
+        and the speed from which braking at a_brake stops the joint at its margin, v² = 2 a_brake room."""
+        room = np.maximum(np.stack((q - self.q_lo, self.q_hi - q)), 0.0)
+        return np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * room))
 
     def _reachable_acceleration(self, headroom: Vec) -> Vec:
         """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
@@ -63,14 +63,13 @@ class ReferenceShaper:
         a_des = (dq_desired - state.dq) / dt
         if not np.isfinite(a_des).all():
             a_des = -state.dq / dt  # never propagate a NaN: brake instead
-        v_lo, v_hi = self._velocity_bounds(state.q + state.dq * dt)
+        # rows: [lower bound, upper bound] of the acceleration
+        headroom = self._braking_speeds(state.q + state.dq * dt) + self._toward * state.dq
+        bounds = self._toward * -self._reachable_acceleration(headroom)
         a_max = self.lim.acceleration
-        a_lo = np.minimum(np.maximum(-self._reachable_acceleration(state.dq - v_lo), -a_max), a_max)
-        a_hi = np.minimum(np.maximum(self._reachable_acceleration(v_hi - state.dq), -a_max), a_max)
-        j_lo = state.ddq - self.jerk_step
-        j_hi = state.ddq + self.jerk_step
-        a_lo = np.minimum(np.maximum(a_lo, j_lo), j_hi)
-        a_hi = np.maximum(np.minimum(np.maximum(a_hi, j_lo), j_hi), a_lo)
+        bounds = np.minimum(np.maximum(bounds, -a_max), a_max)
+        bounds = np.minimum(np.maximum(bounds, state.ddq - self.jerk_step), state.ddq + self.jerk_step)
+        a_lo, a_hi = bounds[0], np.maximum(bounds[1], bounds[0])
         a = np.minimum(np.maximum(a_des, a_lo), a_hi)
         if (a != a_des).any():
             self.clamped_ticks += 1
