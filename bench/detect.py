@@ -1,38 +1,50 @@
-"""Detector benchmark: ms per 640x480 frame for each available backend.
+"""Detector benchmark: ms per 640x480 frame and mAP50/recall on the held-out synthetic test split.
 
 Usage::
 
-    python bench/detect.py [--frames 100] [--threads 2] [--onnx model.onnx] [--pt best.pt]
+    MUJOCO_GL=egl python bench/detect.py [--frames 100] [--threads 2] [--onnx models/instruments.onnx]
+                                         [--data out/datasets/instruments] [--test-images 100] [--pt best.pt]
+
+The held-out test split is the simulator's (lapwrench.perception.dataset): if ``--data`` does not
+hold a test split generated with ``--seed``/``--test-images``, the bench renders one (seed 0 and
+100 images by default; about 15 s). With the same seed, its images are the first images of the
+training dataset's test split (each image's randomness depends only on seed, split and index),
+so the shipped model is never scored on training data.
 
 Backends:
 
-- ``onnx``: :class:`OnnxYoloDetector`. Without ``--onnx`` there is no trained model yet, so the
-  bench GENERATES a tiny untrained stand-in (:func:`make_tiny_conv_yolo_onnx`: four stride-2 convs,
-  YOLOv8-shaped output, dynamic input, 640x480 frames run at 640x480). Its time is the pipeline
-  overhead (letterbox, onnxruntime call, decode, NMS) plus a very small network; it says nothing
-  about a real YOLO's cost or accuracy.
-- ``classical``: :class:`ClassicalDetector`, plus its precision/recall on frames drawn by
-  :func:`draw_instrument_scene` (OpenCV drawings, not the simulator's held-out split).
+- ``onnx``: :class:`OnnxYoloDetector` with ``--onnx`` (default: the shipped ``models/instruments.onnx``;
+  if that is missing, a GENERATED untrained stand-in, whose time is pipeline overhead only).
+- ``classical``: :class:`ClassicalDetector`, scored on the split with ``box="jaws"`` (the jaw
+  region the dataset labels). It was tuned on frames drawn by :func:`draw_instrument_scene`, where
+  it is also scored (shaft + jaw boxes), and does poorly on the rendered scene.
 - ``ultralytics``: only with ``--pt`` and the ultralytics extra installed.
 
-Each time is also printed as a ratio against a reference measured in the same run
-(``cv2.resize`` of the frame to 640x640 + ``cv2.cvtColor``), so results from different machines
-compare. The last line is one JSON object.
+Timing: median wall time of ``detect`` per 640x480 frame (letterbox, inference, decode, NMS
+included), on test-split frames, with onnxruntime on ``--threads`` threads. Each time is also
+given as a ratio against a reference measured in the same run (``cv2.resize`` to 640x640 +
+``cv2.cvtColor``), so results from different machines compare.
 
-mAP50/recall on the held-out synthetic test split are NOT measured yet: the dataset generator and
-the trained model do not exist (TODO, issue 4 items 2-3). The JSON carries ``null`` for them.
+Accuracy: :func:`lapwrench.perception.evaluate.evaluate_detector`, the same for every backend:
+mAP50 over all detections (detector score threshold 0.01), recall/precision at score 0.25.
+
+The last line is one JSON object with unit-suffixed keys.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 import cv2
 import numpy as np
@@ -40,15 +52,23 @@ import numpy as np
 from lapwrench.perception import (
     BackendUnavailableError,
     ClassicalDetector,
+    ClassicalParams,
+    Detector,
     DetectorConfig,
     ModelError,
     OnnxYoloDetector,
     UltralyticsDetector,
 )
 from lapwrench.perception.boxes import box_iou
+from lapwrench.perception.dataset import DatasetConfig, dataset_matches, generate_dataset
+from lapwrench.perception.evaluate import evaluate_detector, read_yolo_split
 from lapwrench.perception.synthetic import draw_instrument_scene, make_tiny_conv_yolo_onnx
 
 W, H = 640, 480
+ROOT = Path(__file__).resolve().parent.parent
+SHIPPED_MODEL = ROOT / "models" / "instruments.onnx"
+EVAL_SCORE = 0.01
+OPERATING_SCORE = 0.25
 
 
 def time_ms(fn: Callable[[np.ndarray], object], frames: list[np.ndarray], n: int, warmup: int = 5) -> list[float]:
@@ -91,19 +111,52 @@ def classical_accuracy(det: ClassicalDetector, n: int) -> tuple[float, float, fl
     return tp / max(tp + fp, 1), tp / max(tp + fn, 1), float(np.median(tips)) if tips else float("nan")
 
 
+def ensure_test_split(root: Path, n: int, seed: int) -> Path:
+    """The held-out test split under ``root``, rendered if missing or generated differently."""
+    cfg = DatasetConfig(n_train=0, n_val=0, n_test=n, seed=seed)
+    if dataset_matches(root, cfg, "test"):
+        return root
+    if (root / "config.json").is_file() and (root / "images" / "test").is_dir():
+        # A larger split with the same seed and ranges (e.g. the training dataset's): use its first n.
+        saved = json.loads((root / "config.json").read_text())
+        want = json.loads(json.dumps(asdict(cfg)))
+        same = all(saved.get(k) == v for k, v in want.items() if not k.startswith("n_"))
+        if same and saved.get("n_test", 0) >= n and len(read_yolo_split(root, "test", (W, H))) >= n:
+            return root
+    root = ROOT / "out" / "datasets" / f"bench-test-seed{seed}-n{n}"
+    if not dataset_matches(root, cfg, "test"):
+        print(f"rendering the held-out test split ({n} images, seed {seed}) into {root} ...", flush=True)
+        generate_dataset(root, cfg, splits=["test"])
+    return root
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=100, help="timed frames per backend")
     ap.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads")
-    ap.add_argument("--onnx", type=Path, help="a YOLO ONNX export (default: generated untrained stand-in)")
+    ap.add_argument("--onnx", type=Path, default=None,
+                    help=f"a YOLO ONNX export (default: {SHIPPED_MODEL.relative_to(ROOT)}, else a generated stand-in)")
     ap.add_argument("--input-size", type=int, default=None, help="ONNX input size for dynamic models")
     ap.add_argument("--pt", type=Path, help="ultralytics .pt weights (needs the train extra)")
+    ap.add_argument("--pt-imgsz", type=int, default=320,
+                    help="ultralytics inference size; the shipped model was trained at 320 (default: %(default)s)")
+    ap.add_argument("--data", type=Path, default=ROOT / "out" / "datasets" / "instruments",
+                    help="dataset root holding the test split (rendered if missing)")
+    ap.add_argument("--test-images", type=int, default=100, help="held-out test images scored")
+    ap.add_argument("--seed", type=int, default=0, help="dataset seed of the test split")
     ap.add_argument("--accuracy-frames", type=int, default=60, help="drawn scenes for classical P/R")
     args = ap.parse_args(argv)
 
-    frames = [draw_instrument_scene((W, H), n_instruments=2, seed=s)[0] for s in range(20)]
-    cfg = DetectorConfig(frame_size=(W, H), color_order="rgb")
-    result: dict[str, object] = {"frame": f"{W}x{H}", "threads": args.threads}
+    data = ensure_test_split(args.data, args.test_images, args.seed)
+    truths = read_yolo_split(data, "test", (W, H))[: args.test_images]
+    frames = [cv2.cvtColor(cv2.imread(str(t.image)), cv2.COLOR_BGR2RGB) for t in truths[:20]]
+    cfg = DetectorConfig(frame_size=(W, H), color_order="rgb", score_threshold=OPERATING_SCORE)
+    eval_cfg = DetectorConfig(frame_size=(W, H), color_order="rgb", score_threshold=EVAL_SCORE)
+    result: dict[str, object] = {"frame": f"{W}x{H}", "threads_count": args.threads,
+                                 "test_images_count": len(truths), "test_seed": args.seed,
+                                 "test_ground_truth_count": int(sum(len(t.boxes) for t in truths))}
+    print(f"held-out test split: {data} ({len(truths)} images, "
+          f"{result['test_ground_truth_count']} instrument boxes)")
 
     def reference(f: np.ndarray) -> object:
         return cv2.cvtColor(cv2.resize(f, (640, 640), interpolation=cv2.INTER_LINEAR), cv2.COLOR_RGB2BGR)
@@ -120,47 +173,56 @@ def main(argv: list[str] | None = None) -> int:
         result[f"{name}_vs_reference_ratio"] = round(med / ref_ms, 2)
         print(f"{name:12s} {med:8.2f} ms/frame (p90 {p90(times):.2f})  = {med / ref_ms:6.1f} x reference  {note}")
 
+    def accuracy(name: str, det: Detector) -> None:
+        t0 = time.perf_counter()
+        r = evaluate_detector(det, data, "test", limit=args.test_images, score_threshold=OPERATING_SCORE)
+        result[f"{name}_test_map50_fraction"] = round(r.map50, 4)
+        result[f"{name}_test_recall_fraction"] = round(r.recall, 4)
+        result[f"{name}_test_precision_fraction"] = round(r.precision, 4)
+        print(f"{name:12s} held-out test: mAP50 {r.map50:.4f}, recall {r.recall:.4f}, precision {r.precision:.4f} "
+              f"at score {OPERATING_SCORE} ({r.n_images} images, {time.perf_counter() - t0:.0f} s)")
+
     # ONNX.
     with tempfile.TemporaryDirectory() as tmp:
-        if args.onnx is None:
+        model = args.onnx if args.onnx is not None else (SHIPPED_MODEL if SHIPPED_MODEL.is_file() else None)
+        if model is None:
             model = make_tiny_conv_yolo_onnx(Path(tmp) / "tiny_standin.onnx", num_classes=1, names=["instrument"])
             note = "[GENERATED untrained stand-in model: pipeline overhead, not a real YOLO]"
             result["onnx_model"] = "generated tiny untrained stand-in (make_tiny_conv_yolo_onnx)"
         else:
-            model, note = args.onnx, f"[{args.onnx}]"
-            result["onnx_model"] = str(args.onnx)
+            note = f"[{model}]"
+            result["onnx_model"] = str(model)
         try:
             onnx_det = OnnxYoloDetector(model, cfg, num_threads=args.threads, input_size=args.input_size)
             input_hw = onnx_det.input_shape_for((H, W))
-            result["onnx_input_hw"] = list(input_hw)
+            result["onnx_input_hw_px"] = list(input_hw)
             report("onnx", time_ms(onnx_det.detect, frames, args.frames), f"input {input_hw[1]}x{input_hw[0]} {note}")
+            accuracy("onnx", OnnxYoloDetector(model, eval_cfg, num_threads=args.threads, input_size=args.input_size))
         except ModelError as exc:
             print(f"onnx         skipped: {exc}")
 
     # Classical.
     classical = ClassicalDetector(cfg)
     report("classical", time_ms(classical.detect, frames, args.frames), "[weight-free OpenCV]")
-    prec, rec, tip = classical_accuracy(classical, args.accuracy_frames)
-    result["classical_drawn_precision"] = round(prec, 3)
-    result["classical_drawn_recall"] = round(rec, 3)
+    accuracy("classical", ClassicalDetector(eval_cfg, ClassicalParams(box="jaws")))
+    prec, rec, tip = classical_accuracy(ClassicalDetector(DetectorConfig(frame_size=(W, H))), args.accuracy_frames)
+    result["classical_drawn_precision_fraction"] = round(prec, 3)
+    result["classical_drawn_recall_fraction"] = round(rec, 3)
     result["classical_drawn_tip_median_px"] = round(tip, 2)
-    print(f"classical on {args.accuracy_frames} drawn scenes (not the sim split): precision {prec:.3f}, "
-          f"recall {rec:.3f}, median tip error {tip:.1f} px")
+    print(f"classical on {args.accuracy_frames} drawn scenes (its own scene type, shaft+jaw boxes): precision "
+          f"{prec:.3f}, recall {rec:.3f}, median tip error {tip:.1f} px")
 
     # ultralytics.
     if args.pt is not None:
         try:
-            ul = UltralyticsDetector(args.pt, cfg)
+            ul = UltralyticsDetector(args.pt, cfg, imgsz=args.pt_imgsz)
             report("ultralytics", time_ms(ul.detect, frames, args.frames), f"[{args.pt}]")
+            accuracy("ultralytics", UltralyticsDetector(args.pt, eval_cfg, imgsz=args.pt_imgsz))
         except (BackendUnavailableError, ModelError) as exc:
             print(f"ultralytics  skipped: {exc}")
     else:
         print("ultralytics  skipped: no --pt weights given")
 
-    print("TODO mAP50/recall on the held-out synthetic test split: not measured; the sim dataset generator "
-          "and a trained model do not exist yet (issue 4 items 2-3).")
-    result["map50_heldout"] = None
-    result["recall_heldout"] = None
     print(json.dumps(result))
     return 0
 
