@@ -75,7 +75,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ONNX input HEIGHTxWIDTH (default: %(default)s)")
     parser.add_argument("--init-weights", default=None,
                         help="start from an earlier run's weights (e.g. out/train/NAME/weights/best.pt)")
-    parser.add_argument("--lr0", type=float, default=None, help="initial learning rate (ultralytics default)")
+    parser.add_argument("--optimizer", default="auto", help="ultralytics optimizer (default: %(default)s)")
+    parser.add_argument("--lr0", type=float, default=None,
+                        help="initial learning rate (ultralytics default; ignored with --optimizer auto)")
     parser.add_argument("--warmup-epochs", type=float, default=None, help="warm-up epochs (ultralytics default)")
     parser.add_argument("--close-mosaic", type=int, default=10,
                         help="final epochs without mosaic augmentation (default: %(default)s)")
@@ -92,7 +94,8 @@ def train_main(args: argparse.Namespace) -> int:
                                  imgsz=args.imgsz, epochs=args.epochs, batch=args.batch, seed=args.seed,
                                  workers=args.workers, export_hw=(h, w), threads=args.threads,
                                  time_hours=args.time_hours, init_weights=args.init_weights, lr0=args.lr0,
-                                 warmup_epochs=args.warmup_epochs, close_mosaic=args.close_mosaic)
+                                 warmup_epochs=args.warmup_epochs, close_mosaic=args.close_mosaic,
+                                 optimizer=args.optimizer)
         if not Path(args.data).is_file():
             print(f"error: {args.data} not found; generate the dataset first (dataset subcommand)", file=sys.stderr)
             return 2

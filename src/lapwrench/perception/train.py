@@ -130,7 +130,9 @@ class TrainSettings:
     init_weights: str | None = None
     """Start from these weights (a previous run's ``best.pt``) instead of random initialisation."""
     lr0: float | None = None
+    """Initial learning rate; ultralytics ignores it with ``optimizer="auto"``."""
     warmup_epochs: float | None = None
+    optimizer: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -174,7 +176,9 @@ def train(settings: TrainSettings, config_dir: str | os.PathLike[str] = ".yolo-c
         "project": str(out),
         "name": settings.name,
         "exist_ok": True,
-        "pretrained": False,
+        # Random initialisation, or the given weights (ultralytics loads them through `pretrained`).
+        "pretrained": str(Path(settings.init_weights).resolve()) if settings.init_weights else False,
+        "optimizer": settings.optimizer,
         "amp": False,
         "plots": False,
         "patience": settings.patience,
