@@ -20,7 +20,7 @@ Nothing here is imported by the controller or by CI (no torch there).
 from __future__ import annotations
 
 import importlib.abc
-import importlib.util
+import importlib.machinery
 import sys
 from typing import Any
 
@@ -57,17 +57,19 @@ def nms_reference(boxes: Any, scores: Any, iou_threshold: float) -> Any:
     return order[torch.tensor(keep, dtype=torch.int64, device=order.device)]
 
 
-def _torchvision_extension_loads() -> bool:
+def _torchvision_extension_loads(locations: Any = None) -> bool:
     """Whether torchvision's compiled extension loads (then it defines its own operators)."""
-    import torch
-
-    spec = importlib.util.find_spec("torchvision")
-    if spec is None or not spec.submodule_search_locations:
-        return False
     import glob
     import os
 
-    for loc in spec.submodule_search_locations:
+    import torch
+
+    if locations is None:
+        spec = importlib.machinery.PathFinder.find_spec("torchvision")
+        if spec is None or not spec.submodule_search_locations:
+            return False
+        locations = spec.submodule_search_locations
+    for loc in locations:
         for lib in glob.glob(os.path.join(loc, "_C*.so")):
             try:
                 torch.ops.load_library(lib)
@@ -77,7 +79,7 @@ def _torchvision_extension_loads() -> bool:
     return False
 
 
-def register_torchvision_nms() -> bool:
+def register_torchvision_nms(*, _locations: Any = None, _during_import: bool = False) -> bool:
     """Define ``torchvision::nms`` with a plain-torch CPU kernel unless torchvision provides it.
 
     Call before importing torchvision. Returns ``True`` when this module's kernel was registered,
@@ -88,9 +90,9 @@ def register_torchvision_nms() -> bool:
 
     if _LIB is not None:
         return True
-    if hasattr(torch.ops.torchvision, "nms") or _torchvision_extension_loads():
+    if hasattr(torch.ops.torchvision, "nms") or _torchvision_extension_loads(_locations):
         return False
-    if "torchvision" in sys.modules:
+    if "torchvision" in sys.modules and not _during_import:
         raise RuntimeError("register_torchvision_nms() must run before torchvision is imported")
     lib = torch.library.Library("torchvision", "DEF")
     for op in ("nms", "qnms"):  # torchvision's meta registrations refer to both
@@ -108,35 +110,42 @@ def _after_torchvision_import(module: Any) -> None:
         module.extension._has_ops = lambda: True
 
 
+def _remove_hook() -> None:
+    sys.meta_path[:] = [f for f in sys.meta_path if getattr(f, "name", None) != _HOOK_NAME]
+
+
 class _WrappedLoader(importlib.abc.Loader):
-    def __init__(self, inner: Any) -> None:
+    """torchvision's own loader; registers the operators just before torchvision executes."""
+
+    def __init__(self, inner: Any, locations: Any) -> None:
         self.inner = inner
+        self.locations = locations
 
     def create_module(self, spec: Any) -> Any:
         return self.inner.create_module(spec)
 
     def exec_module(self, module: Any) -> None:
+        _remove_hook()
+        registered = register_torchvision_nms(_locations=self.locations, _during_import=True)
         self.inner.exec_module(module)
-        _after_torchvision_import(module)
+        if registered:
+            _after_torchvision_import(module)
 
 
 class _Hook(importlib.abc.MetaPathFinder):
-    """Runs :func:`register_torchvision_nms` the first time torchvision is imported."""
+    """Wraps torchvision's loader; finding the module (``importlib.util.find_spec``) has no side
+    effect, only executing it (``import torchvision``) registers the operators."""
+
+    name = _HOOK_NAME
 
     def find_spec(self, fullname: str, path: Any, target: Any = None) -> Any:
         if fullname != "torchvision":
             return None
-        sys.meta_path[:] = [f for f in sys.meta_path if getattr(f, "name", None) != _HOOK_NAME]
-        if not register_torchvision_nms():
-            return None  # torchvision's own extension works: import it untouched
-        import importlib.machinery
-
         spec = importlib.machinery.PathFinder.find_spec(fullname, path)
-        if spec is not None and spec.loader is not None:
-            spec.loader = _WrappedLoader(spec.loader)
+        if spec is None or spec.loader is None:
+            return None
+        spec.loader = _WrappedLoader(spec.loader, spec.submodule_search_locations)
         return spec
-
-    name = _HOOK_NAME
 
 
 def install_import_hook() -> None:
