@@ -47,13 +47,13 @@ def _run(world: SimWorld, seconds: float, render_fps: float | None) -> tuple[flo
 
 
 def _closed_loop(seconds: float, kind: str, render: bool) -> float:
-    """Wall time of ``seconds`` of the demo's closed loop (hand on the handle, instrument tracked)."""
+    """Wall time of ``seconds`` of the demo's closed loop (hand on the handle, instrument tracked from
+    the projected geometry, so the figure is rendering + control, not detector inference)."""
     from lapwrench.config import load
-    from lapwrench.sim.loop import ClosedLoop, ProjectedInstruments
+    from lapwrench.sim.loop import ClosedLoop
 
     cfg = load("swapped-damping").replace(robot={"kind": kind})
-    source = ProjectedInstruments(cfg.camera.width, cfg.camera.height) if render else None
-    loop = ClosedLoop(cfg, seed=0, instruments=source)
+    loop = ClosedLoop(cfg, seed=0, detector="projected" if render else None)
     loop.world.set_instrument_tip(0, loop.world.incision_rest_position() + np.array([0.01, 0.0, -0.145]))
     if render:
         loop.world.render()

@@ -109,6 +109,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             seed=args.seed,
             time_scale=args.time_scale,
             video=not args.no_video,
+            detector=args.detector,
         )
         results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:
@@ -134,6 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--time-scale", type=float, default=1.0, help="shorten the scenarios (0.05-1)")
     demo.add_argument("--no-video", action="store_true", help="skip the MP4s")
+    demo.add_argument(
+        "--detector",
+        default="shipped",
+        help="instrument detector on the rendered frames: shipped (YOLO ONNX), classical, a .onnx/.pt "
+        "model, or projected (simulator geometry, no detector)",
+    )
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
 
     virt = sub.add_parser("virtual", help="closed loop on the controller's own virtual dynamics (no physics)")

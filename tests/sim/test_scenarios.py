@@ -48,7 +48,7 @@ def test_rcm_disturbance_adaptation_relieves_the_trocar() -> None:
 
 
 def test_needle_search_modes_follow_the_paper_sequence() -> None:
-    res = needle_search(TRACKING, ScenarioOptions(time_scale=0.5))
+    res = needle_search(TRACKING, ScenarioOptions(time_scale=0.5, detector="projected"))
     m = res.metrics
     modes = [mode for _, mode in m["mode_timeline"]]
     first_handle = next(i for i, x in enumerate(modes) if "handle" in x)
@@ -61,11 +61,19 @@ def test_needle_search_modes_follow_the_paper_sequence() -> None:
 
 
 def test_workflow_alternates_handle_and_tracking() -> None:
-    res = workflow(TRACKING, ScenarioOptions(time_scale=0.4))
+    res = workflow(TRACKING, ScenarioOptions(time_scale=0.4, detector="projected"))
     modes = {mode for _, mode in res.metrics["mode_timeline"]}
     assert {"tracking", "handle"} <= modes or {"tracking", "handle-dominant"} <= modes
     _physical(res.metrics)
     assert res.metrics["tracking_error_median_px"] < 200.0
+
+
+def test_tracking_runs_on_the_shipped_detector() -> None:
+    res = needle_search(TRACKING, ScenarioOptions(time_scale=0.3))
+    assert "YOLO ONNX" in res.instrument_source
+    modes = {mode for _, mode in res.metrics["mode_timeline"]}
+    assert "tracking" in modes  # detections on rendered frames engaged the tracking wrench
+    _physical(res.metrics)
 
 
 def _physics_metrics(path: Path) -> dict:
@@ -106,6 +114,7 @@ def test_demo_video_of_a_tracking_scenario(tmp_path: Path) -> None:
         ({"scenarios": ["grip", "laparotomy"]}, "unknown scenario laparotomy"),
         ({"config": "/nonexistent/c.yaml"}, "config file not found"),
         ({"time_scale": 3.0}, "time scale"),
+        ({"detector": "/nonexistent/model.onnx"}, "detector must be"),
     ],
 )
 def test_bad_demo_inputs_fail_before_any_simulation(tmp_path: Path, kwargs: dict, match: str) -> None:

@@ -43,6 +43,7 @@ class DemoPlan:
     time_scale: float
     video: bool
     printed_damping_check: bool
+    detector: str = "shipped"
 
 
 def plan_demo(
@@ -54,12 +55,20 @@ def plan_demo(
     time_scale: float = 1.0,
     video: bool = True,
     printed_damping_check: bool = True,
+    detector: str = "shipped",
 ) -> DemoPlan:
     """Validate everything (names, configs, output folder) and return the plan."""
     names = tuple(scenarios or SCENARIOS)
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
         raise DemoError(f"unknown scenario {', '.join(unknown)}; choose from {', '.join(SCENARIOS)}")
+    if detector not in ("shipped", "classical", "projected") and not Path(detector).is_file():
+        raise DemoError(f"detector must be shipped, classical, projected or a model file; {detector} not found")
+    if detector == "shipped":
+        from lapwrench.perception import SHIPPED_MODEL
+
+        if not SHIPPED_MODEL.is_file():
+            raise DemoError(f"the shipped detector model is missing: {SHIPPED_MODEL}")
     if not (0.05 <= time_scale <= 1.0):
         raise DemoError(f"time scale must lie in [0.05, 1], got {time_scale}")
     try:
@@ -85,6 +94,7 @@ def plan_demo(
         time_scale,
         video,
         printed_damping_check and config is None and any(n in TRACKING_SCENARIOS for n in names),
+        detector,
     )
 
 
@@ -122,6 +132,7 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
                 time_scale=plan.time_scale,
                 progress=lambda dt, cap=cap: bar.update(max(0.0, min(dt, cap - bar.n))),
                 video_dir=opts_video if name in TRACKING_SCENARIOS else None,
+                detector=plan.detector,
             )
             res = SCENARIOS[name](plan.configs[name], opts)
             done = cap
@@ -182,6 +193,7 @@ def _printed_damping_check(plan: DemoPlan, bar: object) -> str:
         seed=plan.seed,
         time_scale=plan.time_scale,
         progress=lambda dt: bar.update(max(0.0, min(dt, cap - bar.n))),  # type: ignore[attr-defined]
+        detector=plan.detector,
     )
     try:
         res = needle_search(cfg, opts)

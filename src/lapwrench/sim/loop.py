@@ -1,23 +1,23 @@
 """One closed loop in the simulated world: sensors → controller → robot, at 1 kHz.
 
 Everything the controller sees comes from a simulated sensor (F/T, tactile array, joint-torque
-based external force, camera). Instrument image points come from an :class:`InstrumentSource`:
-the perception pipeline on rendered frames, or — until a detector is configured — the projection
-of the simulator's known instrument geometry (reported as such).
+based external force, camera). Instrument image points come from a detector run on the rendered
+25 fps frames, asynchronously with a modelled latency (the shipped YOLO model by default), or —
+when asked for — from the projection of the simulator's known instrument geometry (reported as such).
 """
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
 from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.perception.async_detect import SimulatedAsyncDetector
+from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.description import ScopeGeometry
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import InstrumentObservation, RobotReading, SensorFrame
@@ -29,6 +29,9 @@ from lapwrench.sim.sensors import (
     TactileGripModel,
 )
 from lapwrench.sim.world import CONTROL_DT, SimWorld
+
+# Camera-to-controller delay of a detection (exposure, transfer, inference), as in the paper's 25 fps pipeline.
+DETECTION_LATENCY = 0.04  # s
 
 # Franka-like joint torque sensing imperfections behind the external force estimate.
 TORQUE_NOISE = 0.05  # N m, white
@@ -44,33 +47,51 @@ class SafetyStopError(RuntimeError):
         super().__init__(f"safety supervisor stopped the robot at t = {time:.3f} s: {reason}")
 
 
-class InstrumentSource(Protocol):
-    """Turns the latest camera frame into instrument image points."""
-
-    name: str
-    latency: float
-
-    def observe(self, world: SimWorld, frame: np.ndarray | None) -> np.ndarray: ...
-
-
-@dataclass
 class ProjectedInstruments:
     """Ground-truth stand-in for a detector: the instrument tips projected through the camera.
 
-    Used only where no detector is configured; the report says so. Tips outside the image or
-    behind the camera are not detected.
+    A :class:`~lapwrench.perception.detection.Detector` that ignores the image. Used only when
+    asked for (``detector="projected"``); the report says so. Tips outside the image or behind the
+    camera are not detected.
     """
 
-    width: int
-    height: int
-    latency: float = 0.04
-    name: str = "projected simulator geometry (no detector)"
+    name = "projected simulator geometry (no detector)"
 
-    def observe(self, world: SimWorld, frame: np.ndarray | None) -> np.ndarray:
-        tips = np.array([world.instrument_tip(i) for i in range(2)])
-        uv, depth = world.project_to_image(tips)
-        ok = (depth > 0.005) & (uv[:, 0] >= 0) & (uv[:, 0] < self.width) & (uv[:, 1] >= 0) & (uv[:, 1] < self.height)
-        return uv[ok]
+    def __init__(self, world: SimWorld, width: int, height: int) -> None:
+        self.world = world
+        self.width = width
+        self.height = height
+
+    def detect(self, image: np.ndarray) -> list[Detection]:
+        tips = np.array([self.world.instrument_tip(i) for i in range(2)])
+        uv, depth = self.world.project_to_image(tips)
+        out = []
+        for (u, v), z in zip(uv, depth, strict=True):
+            if z > 0.005 and 0 <= u < self.width and 0 <= v < self.height:
+                box = (max(0.0, u - 12), max(0.0, v - 12), min(self.width, u + 12), min(self.height, v + 12))
+                out.append(Detection(box=box, score=1.0, class_id=0, point=(float(u), float(v))))
+        return out
+
+
+def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, str]:
+    """The instrument detector of a simulated run and its name for the report.
+
+    ``spec``: ``"shipped"`` (the packaged YOLO ONNX model), ``"classical"``, a path to a ``.onnx``
+    or ``.pt`` model, or ``"projected"`` (simulator geometry, no image processing).
+    """
+    if spec == "projected":
+        det = ProjectedInstruments(world, cfg.camera.width, cfg.camera.height)
+        return det, det.name
+    from lapwrench import perception
+
+    det_cfg = perception.DetectorConfig(frame_size=(cfg.camera.width, cfg.camera.height), color_order="rgb")
+    if spec == "shipped":
+        return perception.make_detector(perception.SHIPPED_MODEL, det_cfg), (
+            f"YOLO ONNX detector {perception.SHIPPED_MODEL.name} on the rendered frames"
+        )
+    if spec == "classical":
+        return perception.make_detector("classical", det_cfg), "classical OpenCV detector on the rendered frames"
+    return perception.make_detector(spec, det_cfg), f"detector {spec} on the rendered frames"
 
 
 @dataclass
@@ -99,7 +120,8 @@ class ClosedLoop:
         seed: int = 0,
         *,
         camera: bool = False,
-        instruments: InstrumentSource | None = None,
+        detector: str | None = None,
+        detection_latency: float = DETECTION_LATENCY,
         scene_config: SceneConfig | None = None,
         on_frame: Callable[[np.ndarray, float, str], None] | None = None,
     ) -> None:
@@ -127,10 +149,12 @@ class ClosedLoop:
             CONTROL_DT,
             SupervisorConfig(max_rcm_error=cfg.inputs.max_rcm_error, cycle_budget=1e9, max_consecutive_misses=0),
         )
-        self.camera = SimCamera(self.world) if (camera or instruments is not None or on_frame) else None
-        self.instruments = instruments
-        self._pending: deque[tuple[float, float, np.ndarray]] = deque()
-        self._latest_obs: InstrumentObservation | None = None
+        self.camera = SimCamera(self.world) if (camera or detector is not None or on_frame) else None
+        self.detection: SimulatedAsyncDetector | None = None
+        self.detector_name = "none"
+        if detector is not None:
+            det, self.detector_name = make_detector(detector, self.world, cfg)
+            self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=detection_latency)
         self.on_frame = on_frame
         self.last_mode = "idle"
         self.ft.tare()
@@ -151,15 +175,11 @@ class ClosedLoop:
         frame = self.camera.frame
         if self.on_frame is not None:
             self.on_frame(frame, t, self.last_mode)
-        if self.instruments is not None:
-            points = self.instruments.observe(self.world, frame)
-            self._pending.append((t + self.instruments.latency, t, points))
+        if self.detection is not None:
+            self.detection.offer(t, frame)
 
     def _observation(self, t: float) -> InstrumentObservation | None:
-        while self._pending and self._pending[0][0] <= t + 1e-9:
-            _, stamp, points = self._pending.popleft()
-            self._latest_obs = InstrumentObservation(points, stamp)
-        return self._latest_obs
+        return None if self.detection is None else self.detection.observation(t)
 
     def step(self, grip_force: float, before_physics: Callable[[float], None] | None = None) -> TickResult:
         """One 1 ms tick: sensors → controller → robot. The hand wrench must already be set."""

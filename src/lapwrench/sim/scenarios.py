@@ -22,7 +22,7 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.robot.limits import limit_usage
-from lapwrench.sim.loop import ClosedLoop, InstrumentSource, ProjectedInstruments, Trace
+from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, InstrumentPath, axis_angle, rotate_axis
 from lapwrench.sim.world import CONTROL_DT
 
@@ -55,13 +55,7 @@ class ScenarioOptions:
     time_scale: float = 1.0
     video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
     progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
-    instrument_source: Callable[[Config], InstrumentSource] | None = None
-
-
-def _source(cfg: Config, opts: ScenarioOptions) -> InstrumentSource:
-    if opts.instrument_source is not None:
-        return opts.instrument_source(cfg)
-    return ProjectedInstruments(cfg.camera.width, cfg.camera.height)
+    detector: str = "shipped"  # "shipped", "classical", "projected" or a model path
 
 
 def _tissue_point(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
@@ -223,7 +217,6 @@ def _scripted_run(
     script: Callable[[ClosedLoop, float], float],
     track_index: int = 0,
 ) -> ScenarioResult:
-    source = _source(cfg, opts)
     snapshots: list[tuple[np.ndarray, str]] = []
     writer = None
     if opts.video_dir is not None:
@@ -238,7 +231,7 @@ def _scripted_run(
         if round(t / 0.04) % 50 == 0:  # every 2 s for the snapshot strip
             snapshots.append((frame, label))
 
-    loop = ClosedLoop(cfg, seed=opts.seed, instruments=source, on_frame=on_frame)
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame)
     trace = Trace()
     t0 = time.perf_counter()
     try:
@@ -263,7 +256,7 @@ def _scripted_run(
         [Run(name, trace, m)],
         {"mode_timeline": timeline, **m},
         frames=snapshots,
-        instrument_source=source.name,
+        instrument_source=loop.detector_name,
     )
 
 

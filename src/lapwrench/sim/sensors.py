@@ -191,6 +191,7 @@ class SimCamera:
 
     def __init__(self, world: SimWorld, fps: float = 25.0) -> None:
         _check_rate(fps, "camera")
+        self.fps = fps
         self.world = world
         self._clock = _SampleAndHold(fps)
         self.frame: np.ndarray | None = None
