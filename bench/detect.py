@@ -2,7 +2,7 @@
 
 Usage::
 
-    MUJOCO_GL=egl python bench/detect.py [--frames 100] [--threads 2] [--onnx models/instruments.onnx]
+    MUJOCO_GL=egl python bench/detect.py [--frames 100] [--threads 2] [--onnx MODEL.onnx]
                                          [--data out/datasets/instruments] [--test-images 100] [--pt best.pt]
 
 The held-out test split is the simulator's (lapwrench.perception.dataset): if ``--data`` does not
@@ -13,7 +13,8 @@ so the shipped model is never scored on training data.
 
 Backends:
 
-- ``onnx``: :class:`OnnxYoloDetector` with ``--onnx`` (default: the shipped ``models/instruments.onnx``;
+- ``onnx``: :class:`OnnxYoloDetector` with ``--onnx`` (default: the shipped model,
+  ``src/lapwrench/data/models/instruments.onnx``;
   if that is missing, a GENERATED untrained stand-in, whose time is pipeline overhead only).
 - ``classical``: :class:`ClassicalDetector`, scored on the split with ``box="jaws"`` (the jaw
   region the dataset labels). It was tuned on frames drawn by :func:`draw_instrument_scene`, where
@@ -50,6 +51,7 @@ import cv2
 import numpy as np
 
 from lapwrench.perception import (
+    SHIPPED_MODEL,
     BackendUnavailableError,
     ClassicalDetector,
     ClassicalParams,
@@ -66,7 +68,6 @@ from lapwrench.perception.synthetic import draw_instrument_scene, make_tiny_conv
 
 W, H = 640, 480
 ROOT = Path(__file__).resolve().parent.parent
-SHIPPED_MODEL = ROOT / "models" / "instruments.onnx"
 EVAL_SCORE = 0.01
 OPERATING_SCORE = 0.25
 

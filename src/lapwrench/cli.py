@@ -156,6 +156,32 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("log-report", help="turn an MCAP run log into plots")
     hardware_cli.add_log_report_arguments(rep)
     rep.set_defaults(func=hardware_cli.log_report_main)
+
+    from lapwrench.perception import cli as perception_cli
+
+    for name, helptext, add, func in (
+        (
+            "dataset",
+            "render a labelled YOLO dataset from the simulated world",
+            perception_cli.add_dataset_arguments,
+            perception_cli.dataset_main,
+        ),
+        (
+            "train",
+            "train the instrument detector (needs the training extra: scripts/train_detector.sh setup)",
+            perception_cli.add_train_arguments,
+            perception_cli.train_main,
+        ),
+        (
+            "calibrate",
+            "camera intrinsics from checkerboard images (Zhang's method)",
+            perception_cli.add_calibrate_arguments,
+            perception_cli.calibrate_main,
+        ),
+    ):
+        sp = sub.add_parser(name, help=helptext)
+        add(sp)
+        sp.set_defaults(func=func)
     return p
 
 

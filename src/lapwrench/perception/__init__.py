@@ -16,7 +16,8 @@ Also here:
 - :mod:`~lapwrench.perception.train` (training venv only) and :mod:`~lapwrench.perception.cli`
   (``dataset_main``, ``train_main``, ``calibrate_main``).
 
-The shipped model is ``models/instruments.onnx`` (:data:`SHIPPED_MODEL` when run from a checkout).
+The shipped model is ``lapwrench/data/models/instruments.onnx`` (:data:`SHIPPED_MODEL`), packaged with the
+library; its model card is the ``README.md`` beside it.
 
 The ultralytics backend, the training code and the ONNX test-model builders import their optional
 packages lazily; MuJoCo is imported only when a dataset is rendered.
@@ -55,7 +56,7 @@ from lapwrench.perception.evaluate import EvalResult, evaluate_detector, evaluat
 from lapwrench.perception.onnx_yolo import OnnxYoloDetector, OutputLayout, infer_layout
 from lapwrench.perception.ultralytics_backend import UltralyticsDetector
 
-SHIPPED_MODEL = Path(__file__).resolve().parents[3] / "models" / "instruments.onnx"
+SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "instruments.onnx"
 """The trained model shipped in the repository (exists in a source checkout / editable install)."""
 
 __all__ = [

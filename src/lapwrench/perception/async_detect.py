@@ -273,7 +273,7 @@ class ThreadedAsyncDetector(_AsyncBase):
 DEFAULT_LATENCY = 0.04
 """Default modelled capture-to-detection latency (s) in simulation: one frame period at 25 fps.
 
-The shipped ONNX model itself needs about 8 ms per frame on two CPU threads (models/README.md);
+The shipped ONNX model itself needs about 8 ms per frame on two CPU threads (src/lapwrench/data/models/README.md);
 the rest stands for exposure, transfer and scheduling, which a real pipeline adds."""
 
 
@@ -286,7 +286,7 @@ def shipped_async_detector(
     num_threads: int = 2,
     model: str | None = None,
 ) -> SimulatedAsyncDetector:
-    """A :class:`SimulatedAsyncDetector` around the shipped ONNX model (``models/instruments.onnx``).
+    """A :class:`SimulatedAsyncDetector` around the shipped ONNX model (``src/lapwrench/data/models/instruments.onnx``).
 
     For the simulation scenarios: W_c from the detector on the rendered 640x480 RGB frames.
     """

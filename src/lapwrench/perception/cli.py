@@ -82,7 +82,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--close-mosaic", type=int, default=10,
                         help="final epochs without mosaic augmentation (default: %(default)s)")
     parser.add_argument("--ship", type=Path, default=None,
-                        help="also copy the exported ONNX here (e.g. models/instruments.onnx)")
+                        help="also copy the exported ONNX here (e.g. src/lapwrench/data/models/instruments.onnx)")
 
 
 def train_main(args: argparse.Namespace) -> int:
