@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from lapwrench.perception import DetectorConfig, FrameError, ModelError, OnnxYoloDetector, make_detector
+from lapwrench.perception import (
+    SHIPPED_MODEL,
+    DetectorConfig,
+    FrameError,
+    ModelError,
+    OnnxYoloDetector,
+    make_detector,
+)
 from lapwrench.perception.dataset import DatasetConfig, FrameLabeller
 from lapwrench.perception.evaluate import evaluate_predictions
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "instruments.onnx"
+MODEL = SHIPPED_MODEL
 
 
 @pytest.fixture(scope="module")
