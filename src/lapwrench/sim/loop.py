@@ -32,6 +32,8 @@ from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 # Camera-to-controller delay of a detection (exposure, transfer, inference), as in the paper's 25 fps pipeline.
 DETECTION_LATENCY = 0.04  # s
+DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
+MAX_INSTRUMENTS = 2  # instruments that can be in the scene (one per port)
 
 # Franka-like joint torque sensing imperfections behind the external force estimate.
 TORQUE_NOISE = 0.05  # N m, white
@@ -84,7 +86,13 @@ def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, st
         return det, det.name
     from lapwrench import perception
 
-    det_cfg = perception.DetectorConfig(frame_size=(cfg.camera.width, cfg.camera.height), color_order="rgb")
+    # The phantom has two instrument ports: keep the two most confident detections above 0.5.
+    det_cfg = perception.DetectorConfig(
+        frame_size=(cfg.camera.width, cfg.camera.height),
+        color_order="rgb",
+        score_threshold=DETECTION_SCORE,
+        max_detections=MAX_INSTRUMENTS,
+    )
     if spec == "shipped":
         return perception.make_detector(perception.SHIPPED_MODEL, det_cfg), (
             f"YOLO ONNX detector {perception.SHIPPED_MODEL.name} on the rendered frames"

@@ -108,10 +108,14 @@ def _pixel_error(loop: ClosedLoop, index: int) -> float:
     return float(math.hypot(u - cam.u0, v - cam.v0))
 
 
+def _park_instrument(loop: ClosedLoop, index: int) -> None:
+    """An instrument withdrawn into its port: tip 2 cm inside the wall, out of the view."""
+    loop.world.set_instrument_tip(index, loop.world.port_position(index) + np.array([0.0, 0.0, -0.02]))
+
+
 def _park_instruments(loop: ClosedLoop) -> None:
-    """Instruments out of the view, resting against the wall near their ports."""
-    for i, (x, y) in enumerate([(0.03, 0.11), (0.03, -0.11)]):
-        loop.world.set_instrument_tip(i, _tissue_point(loop, x, y) + np.array([0, 0, 0.06]))
+    for i in range(2):
+        _park_instrument(loop, i)
 
 
 # --------------------------------------------------------------------------- grip (Fig. 4)
@@ -287,7 +291,7 @@ def needle_search(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Sce
                 [(0.01, -0.006), (0.03, 0.01), (needle[0] + 0.012, needle[1] - 0.004)],
                 speed=0.012 / s,
             )
-            loop.world.set_instrument_tip(1, _tissue_point(loop, 0.03, -0.11) + np.array([0, 0, 0.06]))
+            _park_instrument(loop, 1)
         hand: HandGuide = state["hand"]  # type: ignore[assignment]
         t3, t7 = 6.0 * s, state.get("t7")
         if t7 is None:
@@ -336,7 +340,7 @@ def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Scenario
                 ],
                 speed=0.01,
             )
-            loop.world.set_instrument_tip(1, _tissue_point(loop, 0.03, -0.11) + np.array([0, 0, 0.06]))
+            _park_instrument(loop, 1)
         loop.world.set_instrument_tip(0, state["tool"].tip(max(0.0, t - 3.0 * s) / s))  # type: ignore[attr-defined]
         h1: HandGuide = state["hand1"]  # type: ignore[assignment]
         h2: HandGuide = state["hand2"]  # type: ignore[assignment]
