@@ -96,14 +96,7 @@ class Controller:
         extra_sources: Sequence[WrenchSource] = (),
     ) -> None:
         self.cfg = cfg
-        self.model = model or RobotModel(
-            cfg.robot.kind,
-            ScopeGeometry(
-                length=cfg.scope.length,
-                handle_offset=cfg.scope.handle_offset,
-                oblique_angle_deg=cfg.scope.oblique_angle_deg,
-            ),
-        )
+        self.model = model or RobotModel(cfg.robot.kind, ScopeGeometry.from_config(cfg.scope))
         self.dt = cfg.robot.dt
         self.validator = InputValidator(
             cfg.interaction, cfg.camera, self.model.limits, cfg.inputs.max_image_age

@@ -306,17 +306,11 @@ def _build_loop(
 
     ctrl = Controller(cfg)
     if script is not None:
-        from lapwrench.robot.description import ScopeGeometry
         from lapwrench.sim.robot import SimRobot
         from lapwrench.sim.scene import SceneConfig
         from lapwrench.sim.world import SimWorld
 
-        scope = ScopeGeometry(
-            length=cfg.scope.length,
-            handle_offset=cfg.scope.handle_offset,
-            oblique_angle_deg=cfg.scope.oblique_angle_deg,
-        )
-        world = SimWorld(SceneConfig(kind=cfg.robot.kind, scope=scope, rcm_lambda0=cfg.scope.lambda0))
+        world = SimWorld(SceneConfig.from_config(cfg))
         robot: Any = SimRobot(world, realtime=True, hand_force_H=lambda _t: script.force_H())
         desc = robot.device
     else:

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from lapwrench.config import ScopeConfig
+
 RobotKind = Literal["panda", "fr3"]
 ROBOT_KINDS: tuple[RobotKind, ...] = ("panda", "fr3")
 
@@ -66,6 +68,11 @@ class ScopeGeometry:
     handle_radius: float = 0.02
     handle_length: float = 0.06
     oblique_angle_deg: float = 0.0
+
+    @classmethod
+    def from_config(cls, scope: ScopeConfig) -> ScopeGeometry:
+        """The geometry a configuration's ``scope`` section describes (other fields: defaults)."""
+        return cls(length=scope.length, handle_offset=scope.handle_offset, oblique_angle_deg=scope.oblique_angle_deg)
 
     def __post_init__(self) -> None:
         for name in ("length", "shaft_diameter", "shaft_mass", "handle_mass", "handle_radius", "handle_length"):

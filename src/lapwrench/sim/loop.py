@@ -18,7 +18,6 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
-from lapwrench.robot.description import ScopeGeometry
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import InstrumentObservation, RobotReading, SensorFrame
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
@@ -135,15 +134,10 @@ class ClosedLoop:
     ) -> None:
         self.cfg = cfg
         self.seed = seed
-        scope = ScopeGeometry(
-            length=cfg.scope.length,
-            handle_offset=cfg.scope.handle_offset,
-            oblique_angle_deg=cfg.scope.oblique_angle_deg,
-        )
-        sc = scene_config or SceneConfig(kind=cfg.robot.kind, scope=scope, rcm_lambda0=cfg.scope.lambda0)
+        sc = scene_config or SceneConfig.from_config(cfg)
         self.world = SimWorld(build_scene(sc))
         self.world.reset()
-        self.model = RobotModel(cfg.robot.kind, scope)
+        self.model = RobotModel(sc.kind, sc.scope)
         self.controller = Controller(cfg, self.model)
         rng = np.random.SeedSequence(seed)
         s_ft, s_tac, s_obs = (int(x.generate_state(1)[0]) for x in rng.spawn(3))

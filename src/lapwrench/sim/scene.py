@@ -41,6 +41,7 @@ from functools import cache
 import mujoco
 import numpy as np
 
+from lapwrench.config import CameraConfig, Config
 from lapwrench.robot.description import (
     ARM_SPECS,
     FRAME_C,
@@ -90,16 +91,24 @@ def default_initial_configuration(kind: RobotKind = "panda") -> np.ndarray:
     return np.array(_DEFAULT_Q0, dtype=float)
 
 
+_PAPER_CAMERA = CameraConfig()
+
+
 @dataclass(frozen=True)
 class CameraIntrinsics:
-    """Pinhole intrinsics of the laparoscope camera (paper Sec. IV-A), in pixels."""
+    """Pinhole intrinsics of the laparoscope camera, in pixels (defaults: the configuration's,
+    i.e. the paper's Sec. IV-A values)."""
 
-    width: int = 640
-    height: int = 480
-    fx: float = 506.57
-    fy: float = 506.72
-    u0: float = 312.22
-    v0: float = 243.39
+    width: int = _PAPER_CAMERA.width
+    height: int = _PAPER_CAMERA.height
+    fx: float = _PAPER_CAMERA.fx
+    fy: float = _PAPER_CAMERA.fy
+    u0: float = _PAPER_CAMERA.u0
+    v0: float = _PAPER_CAMERA.v0
+
+    @classmethod
+    def from_config(cls, cam: CameraConfig) -> CameraIntrinsics:
+        return cls(cam.width, cam.height, cam.fx, cam.fy, cam.u0, cam.v0)
 
     @property
     def matrix(self) -> np.ndarray:
@@ -196,6 +205,16 @@ class SceneConfig:
             raise ValueError(f"rcm_lambda0 must lie in (0, 1), got {self.rcm_lambda0!r}")
         if self.q0 is not None and len(self.q0) != 7:
             raise ValueError(f"q0 needs 7 joint values, got {len(self.q0)}")
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> SceneConfig:
+        """The world a controller configuration runs in: same robot, scope, camera and RCM place."""
+        return cls(
+            kind=cfg.robot.kind,
+            scope=ScopeGeometry.from_config(cfg.scope),
+            camera=CameraIntrinsics.from_config(cfg.camera),
+            rcm_lambda0=cfg.scope.lambda0,
+        )
 
     def initial_configuration(self) -> np.ndarray:
         """q0 of this config (the default one unless given)."""
