@@ -62,7 +62,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", default=f"{DEFAULT_DATASET}/data.yaml", help="data.yaml (default: %(default)s)")
     parser.add_argument("--out", default="out/train", help="run directory root (default: %(default)s)")
     parser.add_argument("--name", default="instruments", help="run name (default: %(default)s)")
-    parser.add_argument("--scale", default="p", help="YOLO11 scale: p (pico), u, n (default: %(default)s)")
+    parser.add_argument("--scale", default="n", help="YOLO11 scale: p (pico), u, n (default: %(default)s)")
     parser.add_argument("--imgsz", type=int, default=320, help="training image size (default: %(default)s)")
     parser.add_argument("--epochs", type=int, default=60, help="epochs (default: %(default)s)")
     parser.add_argument("--time-hours", type=float, default=None,

@@ -116,7 +116,7 @@ class TrainSettings:
     data: str
     out_dir: str = "out/train"
     name: str = "instruments"
-    scale: str = "p"
+    scale: str = "n"
     imgsz: int = 320
     epochs: int = 60
     batch: int = 16
