@@ -71,6 +71,7 @@ def test_workflow_alternates_handle_and_tracking() -> None:
 def test_tracking_runs_on_the_shipped_detector() -> None:
     res = needle_search(TRACKING, ScenarioOptions(time_scale=0.3))
     assert "YOLO ONNX" in res.instrument_source
+    assert "latency 40 ms" in res.instrument_source and "inference median" in res.instrument_source
     modes = {mode for _, mode in res.metrics["mode_timeline"]}
     assert "tracking" in modes  # detections on rendered frames engaged the tracking wrench
     _physical(res.metrics)

@@ -138,6 +138,8 @@ class SimulatedAsyncDetector(_AsyncBase):
                                           and latency >= 0):
             raise ValueError(f"latency must be >= 0 seconds or 'measured', got {latency!r}")
         self.latency = latency
+        self.compute_seconds: list[float] = []
+        """Wall time of every ``detect`` call (s), to report the detector's measured inference time."""
         self._pending: deque[TimedDetections] = deque()
         self._latest: TimedDetections | None = None
 
@@ -153,6 +155,7 @@ class SimulatedAsyncDetector(_AsyncBase):
         t0 = time.perf_counter()
         dets = tuple(self.detector.detect(image))
         compute = time.perf_counter() - t0
+        self.compute_seconds.append(compute)
         lat = compute if self.latency == "measured" else float(self.latency)
         self._pending.append(TimedDetections(dets, float(now), float(now) + lat, compute))
         self._advance_schedule(now)

@@ -213,8 +213,8 @@ def _printed_damping_check(plan: DemoPlan, bar: object) -> str:
 
 
 def _instrument_sources(results: dict[str, ScenarioResult]) -> str:
-    names = {r.instrument_source for r in results.values() if r.instrument_source}
-    return ", ".join(sorted(names)) or "none (no tracking scenario run)"
+    sources = [f"{name}: {r.instrument_source}" for name, r in results.items() if r.instrument_source]
+    return "; ".join(sources) or "none (no tracking scenario run)"
 
 
 def _notes(plan: DemoPlan) -> list[str]:

@@ -171,6 +171,18 @@ class ClosedLoop:
     def time(self) -> float:
         return self.t
 
+    @property
+    def detector_description(self) -> str:
+        """The detector, its frame rate, its modelled latency and its measured inference time."""
+        if self.detection is None:
+            return self.detector_name
+        lat = self.detection.latency
+        latency = "measured" if lat == "measured" else f"{float(lat) * 1e3:.0f} ms"
+        times = self.detection.compute_seconds
+        inference = f", inference median {np.median(times) * 1e3:.1f} ms (wall time)" if times else ""
+        return (f"{self.detector_name}, {self.detection.frame_rate:.0f} fps, asynchronous, "
+                f"capture-to-use latency {latency}{inference}")
+
     def _camera_step(self, t: float) -> None:
         if self.camera is None or not self.camera.capture(t):
             return

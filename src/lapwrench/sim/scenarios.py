@@ -260,7 +260,7 @@ def _scripted_run(
         [Run(name, trace, m)],
         {"mode_timeline": timeline, **m},
         frames=snapshots,
-        instrument_source=loop.detector_name,
+        instrument_source=loop.detector_description,
     )
 
 
