@@ -76,18 +76,21 @@ class ScriptedHand:
         self._stop.set()
         self._thread.join(2.0)
 
+    def publish(self, t: float) -> None:
+        """Publish the samples of script time ``t`` (the thread calls it on wall time; a test may
+        call it from the loop's own cycle instead)."""
+        o = self.override(t) if self.override is not None else None
+        if o == "silent":
+            return
+        if o is not None:
+            self.ft.put(Wrench(np.asarray(o[0], float), np.asarray(o[1], float)))
+        else:
+            self.ft.put(Wrench(np.asarray(self.force(t), float), np.zeros(3)))
+        self.tactile.put(TactileFrame(np.full(64, self.grip(t), dtype=np.uint8)))
+
     def _run(self) -> None:
         while not self._stop.is_set():
-            t = self.now()
-            o = self.override(t) if self.override is not None else None
-            if o == "silent":
-                pass
-            elif o is not None:
-                self.ft.put(Wrench(np.asarray(o[0], float), np.asarray(o[1], float)))
-            else:
-                self.ft.put(Wrench(np.asarray(self.force(t), float), np.zeros(3)))
-            if o != "silent":
-                self.tactile.put(TactileFrame(np.full(64, self.grip(t), dtype=np.uint8)))
+            self.publish(self.now())
             self._stop.wait(1.0 / self.rate_hz)
 
     @property
