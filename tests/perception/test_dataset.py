@@ -10,6 +10,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np
 import pytest
 import yaml
+from helpers import make_renderable_world
 
 from lapwrench.perception.dataset import (
     DatasetConfig,
@@ -26,14 +27,7 @@ W, H = 640, 480
 
 @pytest.fixture(scope="module")
 def world():
-    from lapwrench.sim.world import SimWorld
-
-    w = SimWorld()
-    try:
-        w.render()
-    except Exception as exc:  # no EGL/Mesa
-        w.close()
-        pytest.skip(f"headless rendering unavailable: {exc}")
+    w = make_renderable_world()
     yield w
     w.close()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import make_renderable_world
 
 from lapwrench.perception import (
     SHIPPED_MODEL,
@@ -28,14 +29,7 @@ def detector() -> OnnxYoloDetector:
 @pytest.fixture(scope="module")
 def frames():
     """Twelve fresh frames (seeds unlike any dataset split's), both instruments placed in view."""
-    from lapwrench.sim.world import SimWorld
-
-    world = SimWorld()
-    try:
-        world.render()
-    except Exception as exc:  # no EGL/Mesa
-        world.close()
-        pytest.skip(f"headless rendering unavailable: {exc}")
+    world = make_renderable_world()
     lab = FrameLabeller(world, DatasetConfig(instrument_prob=1.0, border_prob=0.15))
     try:
         out = [lab.render(np.random.default_rng([4242, i])) for i in range(12)]

@@ -24,14 +24,3 @@ def world(panda_scene: Scene) -> SimWorld:
     w = SimWorld(panda_scene)
     yield w
     w.close()
-
-
-def make_renderable_world(scene: Scene) -> SimWorld:
-    """A world whose renderer works, or a pytest skip naming why EGL is unusable."""
-    w = SimWorld(scene)
-    try:
-        w.render()
-    except Exception as exc:  # GL context creation fails without EGL/Mesa
-        w.close()
-        pytest.skip(f"headless rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}")
-    return w

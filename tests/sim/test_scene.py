@@ -7,6 +7,7 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
+from helpers import make_renderable_world
 
 from lapwrench.sim.scene import (
     CAMERA_NAME,
@@ -19,8 +20,6 @@ from lapwrench.sim.scene import (
     default_initial_configuration,
 )
 from lapwrench.sim.world import SimWorld
-
-from .conftest import make_renderable_world
 
 
 @pytest.mark.parametrize("kind", ["panda", "fr3"])
