@@ -271,32 +271,3 @@ class ThreadedAsyncDetector(_AsyncBase):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-DEFAULT_LATENCY = 0.04
-"""Default modelled capture-to-detection latency (s) in simulation: one frame period at 25 fps.
-
-The shipped ONNX model itself needs about 8 ms per frame on two CPU threads (src/lapwrench/data/models/README.md);
-the rest stands for exposure, transfer and scheduling, which a real pipeline adds."""
-
-
-def shipped_async_detector(
-    *,
-    latency: float | Literal["measured"] = DEFAULT_LATENCY,
-    frame_rate: float = 25.0,
-    max_age: float | None = None,
-    score_threshold: float = 0.25,
-    num_threads: int = 2,
-    model: str | None = None,
-) -> SimulatedAsyncDetector:
-    """A :class:`SimulatedAsyncDetector` around the shipped ONNX model (``src/lapwrench/data/models/instruments.onnx``).
-
-    For the simulation scenarios: W_c from the detector on the rendered 640x480 RGB frames.
-    """
-    from lapwrench.perception import SHIPPED_MODEL
-    from lapwrench.perception.detection import DetectorConfig
-    from lapwrench.perception.onnx_yolo import OnnxYoloDetector
-
-    det = OnnxYoloDetector(model or SHIPPED_MODEL, DetectorConfig(score_threshold=score_threshold, color_order="rgb"),
-                           num_threads=num_threads)
-    return SimulatedAsyncDetector(det, frame_rate=frame_rate, latency=latency, max_age=max_age)
