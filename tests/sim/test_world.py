@@ -152,6 +152,8 @@ def test_instruments_pass_through_ports(world: SimWorld) -> None:
     assert (tip - port) @ axis > 0.1
     _uv, z = world.project_to_image(tip)
     assert z > 0
+    assert world.n_instruments == 2  # the paper's two instruments, each through its own port
+    assert np.linalg.norm(world.port_position(1) - port) > 0.05
 
 
 def test_instability_detector_fires_on_nan(world: SimWorld) -> None:

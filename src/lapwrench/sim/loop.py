@@ -66,7 +66,7 @@ class ProjectedInstruments:
         self.height = height
 
     def detect(self, image: np.ndarray) -> list[Detection]:
-        tips = np.array([self.world.instrument_tip(i) for i in range(2)])
+        tips = np.array([self.world.instrument_tip(i) for i in range(self.world.n_instruments)])
         uv, depth = self.world.project_to_image(tips)
         out = []
         for (u, v), z in zip(uv, depth, strict=True):

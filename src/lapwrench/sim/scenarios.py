@@ -114,7 +114,7 @@ def _park_instrument(loop: ClosedLoop, index: int) -> None:
 
 
 def _park_instruments(loop: ClosedLoop) -> None:
-    for i in range(2):
+    for i in range(loop.world.n_instruments):
         _park_instrument(loop, i)
 
 

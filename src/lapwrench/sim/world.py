@@ -373,6 +373,11 @@ class SimWorld:
         sh = np.asarray(shift, float)
         return np.array([sh[0], sh[1], 0.0]) * self._housing_k
 
+    @property
+    def n_instruments(self) -> int:
+        """Number of instruments in the scene (each with its own port)."""
+        return len(self._mocap)
+
     def port_position(self, index: int) -> np.ndarray:
         """World position of instrument port ``index`` (0 left, 1 right); moves with the housing."""
         return self.data.site_xpos[self._port_sites[index]].copy()
