@@ -15,7 +15,7 @@ from lapwrench.perception import (
     letterbox,
     nms,
 )
-from lapwrench.perception.boxes import PAD_VALUE, box_iou
+from lapwrench.perception.boxes import PAD_VALUE, box_iou, fuse_boxes, mirror_boxes
 
 
 @pytest.mark.parametrize(
@@ -63,6 +63,24 @@ def test_nms_matches_brute_force():
         if all(box_iou(boxes[i], boxes[[j]])[0] <= 0.5 for j in ref):
             ref.append(int(i))
     assert keep.tolist() == ref
+
+
+def test_mirror_boxes_is_an_involution():
+    boxes = np.array([[10.0, 5.0, 50.0, 25.0], [0.0, 0.0, 320.0, 10.0]])
+    np.testing.assert_allclose(mirror_boxes(boxes, 320), [[270.0, 5.0, 310.0, 25.0], [0.0, 0.0, 320.0, 10.0]])
+    np.testing.assert_allclose(mirror_boxes(mirror_boxes(boxes, 320), 320), boxes)
+
+
+def test_fuse_boxes_weights_overlapping_boxes_by_score():
+    boxes = np.array([[0.0, 0.0, 10.0, 10.0], [1.0, 0.0, 11.0, 10.0], [50.0, 50.0, 60.0, 60.0], [0.0, 0.0, 10.0, 9.0]])
+    scores = np.array([0.6, 0.3, 0.9, 0.5])
+    fused = fuse_boxes(boxes, scores, np.array([2, 0]), 0.55)
+    np.testing.assert_allclose(fused[0], boxes[2])  # nothing overlaps the far box
+    expected = (0.6 * boxes[0] + 0.3 * boxes[1] + 0.5 * boxes[3]) / 1.4
+    np.testing.assert_allclose(fused[1], expected)
+    # with classes, only boxes of the kept box's class are absorbed
+    fused = fuse_boxes(boxes, scores, np.array([0]), 0.55, class_ids=np.array([0, 0, 0, 1]))
+    np.testing.assert_allclose(fused[0], (0.6 * boxes[0] + 0.3 * boxes[1]) / 0.9)
 
 
 def test_nms_per_class_and_max_keep():

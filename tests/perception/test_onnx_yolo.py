@@ -53,6 +53,22 @@ def test_each_layout_decodes_and_unletterboxes(make_layout_model, frame, truth, 
     assert dets[0].point == pytest.approx((150.0, 140.0), abs=1e-3)
 
 
+def test_test_time_flip_adds_the_mirrored_pass_and_fuses(make_layout_model, frame, truth):
+    # The constant model emits the same input-space boxes for the mirrored frame, so each truth
+    # box also comes back mirrored (x -> 640 - x at ratio 1); A absorbs its near-duplicate.
+    det = OnnxYoloDetector(make_layout_model("yolov8", (640, 640)), test_time_flip=True)
+    assert "test_time_flip=True" in repr(det)
+    dets = det.detect(frame)
+    assert summary(dets) == [(0, 0.9), (0, 0.9), (1, 0.7), (1, 0.7), (2, 0.6), (2, 0.6)]
+    a, a_dup = np.array(truth["A"].box), np.array(truth["A_dup"].box)
+    fused_a = (0.9 * a + 0.8 * a_dup) / 1.7
+    mirrored_a = np.array([640 - fused_a[2], fused_a[1], 640 - fused_a[0], fused_a[3]])
+    left_to_right = sorted((d.box for d in dets[:2]), key=lambda b: b[0])
+    np.testing.assert_allclose(left_to_right, [fused_a, mirrored_a], atol=1e-3)
+    c_boxes = sorted((d.box for d in dets[4:]), key=lambda b: b[0])
+    np.testing.assert_allclose(c_boxes, [[640 - 500.0, 300.0, 640 - 400.0, 420.0], truth["C"].box], atol=1e-3)
+
+
 def test_dynamic_input_is_stride_aligned(make_layout_model):
     det = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True), input_size=320)
     assert det.input_shape_for((480, 640)) == (256, 320)

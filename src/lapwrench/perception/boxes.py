@@ -126,6 +126,43 @@ def box_iou(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
 
 
+def mirror_boxes(boxes: np.ndarray, width: float) -> np.ndarray:
+    """xyxy boxes found in a horizontally mirrored image of ``width`` pixels, in the original image."""
+    out = np.array(boxes, dtype=np.float64).reshape(-1, 4)
+    out[:, [0, 2]] = width - out[:, [2, 0]]
+    return out
+
+
+def fuse_boxes(
+    boxes: np.ndarray,
+    scores: np.ndarray,
+    keep: np.ndarray,
+    iou_threshold: float,
+    class_ids: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each kept box replaced by the score-weighted mean of the boxes overlapping it.
+
+    The merge step of test-time augmentation: after NMS over the candidates of several passes,
+    every kept box absorbs the boxes it suppressed (IoU above ``iou_threshold``, itself included,
+    of its own class when ``class_ids`` is given), so both passes shape the final box instead of
+    the best-scoring one alone.
+
+    Returns:
+        ``(len(keep), 4)`` xyxy boxes, in the order of ``keep``.
+    """
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+    scores = np.asarray(scores, dtype=np.float64).reshape(-1)
+    fused = np.empty((len(keep), 4))
+    for row, i in enumerate(keep):
+        near = box_iou(boxes[i], boxes) > iou_threshold
+        if class_ids is not None:
+            near &= np.asarray(class_ids).reshape(-1) == class_ids[i]
+        near[i] = True
+        w = scores[near]
+        fused[row] = (boxes[near] * w[:, None]).sum(axis=0) / w.sum()
+    return fused
+
+
 def nms(
     boxes: np.ndarray,
     scores: np.ndarray,
