@@ -107,6 +107,22 @@ def test_run_names_the_missing_device_before_the_robot(capsys: pytest.CaptureFix
     assert hw.run_main(run_args(ft="bogus://x")) == 2  # no --robot-ip and no --dry-run
 
 
+def test_run_refuses_a_camera_whose_frames_do_not_match_the_intrinsics(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import cv2
+
+    video = tmp_path / "scope_320x240.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (320, 240))
+    for _ in range(5):
+        writer.write(np.full((240, 320, 3), 90, np.uint8))
+    writer.release()
+    code = hw.run_main(run_args(robot_ip="127.0.0.1", camera=str(video), duration=1))
+    err = capsys.readouterr().err
+    # the packaged intrinsics are for 640x480 frames: named before the robot is contacted
+    assert code == 2 and "scope_320x240.avi" in err and "640x480" in err, err
+
+
 def test_parse_device_specs() -> None:
     assert hw.parse_ft_url("hex://192.168.1.1") == ("hex", "192.168.1.1", 49152)
     assert hw.parse_ft_url("ati://10.0.0.5:5000") == ("ati", "10.0.0.5", 5000)

@@ -175,9 +175,13 @@ class _Devices:
 
 
 def _open_sources(
-    args: argparse.Namespace, devices: _Devices, script: DryRunScript | None
+    args: argparse.Namespace, cfg: Any, devices: _Devices, script: DryRunScript | None
 ) -> tuple[Any, dict[str, str]]:
-    """Open, check and start every sensor source; return (Sources, device descriptions)."""
+    """Open, check and start every sensor source; return (Sources, device descriptions).
+
+    The camera's frames must have the size of the configured intrinsics (``camera.width`` x
+    ``camera.height``), which the tracking wrench projects with: a mismatch fails at start.
+    """
     from lapwrench.drivers import AtiNetFTSensor, DeviceError, OnRobotHexSensor, SerialTactileArray
     from lapwrench.hardware.runner import DetectorWorker, Sources
 
@@ -220,13 +224,14 @@ def _open_sources(
             described["tactile"] = tac.device
         if args.camera is not None:
             from lapwrench.drivers.camera import Camera
-            from lapwrench.perception import PerceptionError, make_detector
+            from lapwrench.perception import DetectorConfig, PerceptionError, make_detector
 
-            cam = Camera(parse_camera(args.camera), loop=True)
+            size = (cfg.camera.width, cfg.camera.height)
+            cam = Camera(parse_camera(args.camera), loop=True, expected_size=size)
             cam.start()
             devices.add(cam.stop)
             try:
-                detector = make_detector(args.detector)
+                detector = make_detector(args.detector, DetectorConfig(frame_size=size))
             except (PerceptionError, ImportError) as exc:
                 raise CliError(f"instrument detector {args.detector!r}: {exc}") from exc
             worker = DetectorWorker(cam.buffer, detector).start()
@@ -258,7 +263,7 @@ def run_main(args: argparse.Namespace) -> int:
     logger = None
     script = DryRunScript() if args.dry_run else None
     try:
-        sources, described = _open_sources(args, devices, script)
+        sources, described = _open_sources(args, cfg, devices, script)
         loop, robot_desc = _build_loop(args, cfg, sources, script)
         if args.log:
             from lapwrench.hardware.log import RunLogger
