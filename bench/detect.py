@@ -14,7 +14,8 @@ so the shipped model is never scored on training data.
 Backends:
 
 - ``onnx``: :class:`OnnxYoloDetector` with ``--onnx`` (default: the shipped model,
-  ``src/lapwrench/data/models/instruments.onnx``;
+  ``src/lapwrench/data/models/instruments.onnx``, run with its ``SHIPPED_MODEL_OPTIONS``, i.e. the
+  mirrored second pass unless ``--test-time-flip off``;
   if that is missing, a GENERATED untrained stand-in, whose time is pipeline overhead only).
 - ``classical``: :class:`ClassicalDetector`, scored on the split with ``box="jaws"`` (the jaw
   region the dataset labels). It was tuned on frames drawn by :func:`draw_instrument_scene`, where
@@ -52,6 +53,7 @@ import numpy as np
 
 from lapwrench.perception import (
     SHIPPED_MODEL,
+    SHIPPED_MODEL_OPTIONS,
     BackendUnavailableError,
     ClassicalDetector,
     ClassicalParams,
@@ -138,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--onnx", type=Path, default=None,
                     help=f"a YOLO ONNX export (default: {SHIPPED_MODEL.relative_to(ROOT)}, else a generated stand-in)")
     ap.add_argument("--input-size", type=int, default=None, help="ONNX input size for dynamic models")
+    ap.add_argument("--test-time-flip", choices=["shipped", "on", "off"], default="shipped",
+                    help="mirrored second pass of the ONNX model: as the shipped model runs (default), on or off")
     ap.add_argument("--pt", type=Path, help="ultralytics .pt weights (needs the train extra)")
     ap.add_argument("--pt-imgsz", type=int, default=320,
                     help="ultralytics inference size; the shipped model was trained at 320 (default: %(default)s)")
@@ -193,12 +197,19 @@ def main(argv: list[str] | None = None) -> int:
         else:
             note = f"[{model}]"
             result["onnx_model"] = str(model)
+        shipped_flip = bool(SHIPPED_MODEL_OPTIONS.get("test_time_flip")) and model == SHIPPED_MODEL
+        flip = args.test_time_flip == "on" or (args.test_time_flip == "shipped" and shipped_flip)
+        result["onnx_test_time_flip"] = flip
+        if flip:
+            note += " [mirrored second pass]"
         try:
-            onnx_det = OnnxYoloDetector(model, cfg, num_threads=args.threads, input_size=args.input_size)
+            onnx_det = OnnxYoloDetector(model, cfg, num_threads=args.threads, input_size=args.input_size,
+                                        test_time_flip=flip)
             input_hw = onnx_det.input_shape_for((H, W))
             result["onnx_input_hw_px"] = list(input_hw)
             report("onnx", time_ms(onnx_det.detect, frames, args.frames), f"input {input_hw[1]}x{input_hw[0]} {note}")
-            accuracy("onnx", OnnxYoloDetector(model, eval_cfg, num_threads=args.threads, input_size=args.input_size))
+            accuracy("onnx", OnnxYoloDetector(model, eval_cfg, num_threads=args.threads, input_size=args.input_size,
+                                              test_time_flip=flip))
         except ModelError as exc:
             print(f"onnx         skipped: {exc}")
 

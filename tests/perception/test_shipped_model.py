@@ -8,11 +8,13 @@ from helpers import make_renderable_world
 
 from lapwrench.perception import (
     SHIPPED_MODEL,
+    SHIPPED_MODEL_OPTIONS,
     DetectorConfig,
     FrameError,
     ModelError,
     OnnxYoloDetector,
     make_detector,
+    shipped_detector,
 )
 from lapwrench.perception.dataset import DatasetConfig, FrameLabeller
 from lapwrench.perception.evaluate import evaluate_predictions
@@ -23,7 +25,7 @@ MODEL = SHIPPED_MODEL
 @pytest.fixture(scope="module")
 def detector() -> OnnxYoloDetector:
     assert MODEL.is_file(), f"the shipped model {MODEL} is missing"
-    return OnnxYoloDetector(MODEL, DetectorConfig(score_threshold=0.25), num_threads=2)
+    return shipped_detector(DetectorConfig(score_threshold=0.25))
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +63,11 @@ def test_detects_instruments_in_fresh_sim_frames(detector, frames):
 def test_make_detector_builds_the_shipped_model():
     det = make_detector(MODEL)
     assert isinstance(det, OnnxYoloDetector)
+
+
+def test_shipped_detector_runs_with_the_shipped_options(detector):
+    assert detector.model_path == MODEL
+    assert detector.test_time_flip == SHIPPED_MODEL_OPTIONS.get("test_time_flip", False)
 
 
 @pytest.mark.parametrize(

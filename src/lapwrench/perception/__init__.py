@@ -59,9 +59,23 @@ from lapwrench.perception.ultralytics_backend import UltralyticsDetector
 SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "instruments.onnx"
 """The trained model shipped in the repository (exists in a source checkout / editable install)."""
 
+SHIPPED_MODEL_OPTIONS: dict[str, Any] = {"test_time_flip": True}
+"""How the shipped model runs (:class:`OnnxYoloDetector` keyword arguments): with its mirrored
+second pass, chosen on the validation split (see ``data/models/README.md``)."""
+
+
+def shipped_detector(config: DetectorConfig | None = None) -> OnnxYoloDetector:
+    """The shipped model with its :data:`SHIPPED_MODEL_OPTIONS`.
+
+    Raises:
+        ModelError: the model file is missing or cannot be loaded.
+    """
+    return OnnxYoloDetector(SHIPPED_MODEL, config, **SHIPPED_MODEL_OPTIONS)
+
 __all__ = [
     "CLASS_NAMES",
     "SHIPPED_MODEL",
+    "SHIPPED_MODEL_OPTIONS",
     "BackendUnavailableError",
     "CalibrationError",
     "CalibrationResult",
@@ -93,6 +107,7 @@ __all__ = [
     "make_detector",
     "nms",
     "read_intrinsics_yaml",
+    "shipped_detector",
     "validate_frame",
     "write_intrinsics_yaml",
 ]

@@ -95,8 +95,9 @@ def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, st
         max_detections=MAX_INSTRUMENTS,
     )
     if spec == "shipped":
-        return perception.make_detector(perception.SHIPPED_MODEL, det_cfg), (
-            f"YOLO ONNX detector {perception.SHIPPED_MODEL.name} on the rendered frames"
+        flip = ", mirrored second pass" if perception.SHIPPED_MODEL_OPTIONS.get("test_time_flip") else ""
+        return perception.shipped_detector(det_cfg), (
+            f"YOLO ONNX detector {perception.SHIPPED_MODEL.name}{flip} on the rendered frames"
         )
     if spec == "classical":
         return perception.make_detector("classical", det_cfg), "classical OpenCV detector on the rendered frames"
