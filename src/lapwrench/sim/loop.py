@@ -30,8 +30,8 @@ from lapwrench.sim.sensors import (
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 # Modelled capture-to-use delay of a detection (s): one frame period at 25 fps. The shipped model's
-# inference is 5 ms in bench/detect.py and about 9 ms inside the simulated loop (sharing the CPU
-# with physics and rendering); the rest stands for exposure, transfer and scheduling.
+# inference (two passes) is 9 ms in bench/detect.py and about 17 ms inside the simulated loop
+# (sharing the CPU with physics and rendering); the rest stands for exposure, transfer, scheduling.
 DETECTION_LATENCY = 0.04
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
 MAX_INSTRUMENTS = 2  # instruments that can be in the scene (one per port)
