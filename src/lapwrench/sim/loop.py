@@ -34,7 +34,6 @@ from lapwrench.sim.world import CONTROL_DT, SimWorld
 # (sharing the CPU with physics and rendering); the rest stands for exposure, transfer, scheduling.
 DETECTION_LATENCY = 0.04
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
-MAX_INSTRUMENTS = 2  # instruments that can be in the scene (one per port)
 
 # Franka-like joint torque sensing imperfections behind the external force estimate.
 TORQUE_NOISE = 0.05  # N m, white
@@ -87,18 +86,17 @@ def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, st
         return det, det.name
     from lapwrench import perception
 
-    # The phantom has two instrument ports: keep the two most confident detections above 0.5.
+    # One instrument per port: keep that many of the most confident detections above 0.5.
     det_cfg = perception.DetectorConfig(
         frame_size=(cfg.camera.width, cfg.camera.height),
         color_order="rgb",
         score_threshold=DETECTION_SCORE,
-        max_detections=MAX_INSTRUMENTS,
+        max_detections=world.n_instruments,
     )
     if spec == "shipped":
-        flip = ", mirrored second pass" if perception.SHIPPED_MODEL_OPTIONS.get("test_time_flip") else ""
-        return perception.shipped_detector(det_cfg), (
-            f"YOLO ONNX detector {perception.SHIPPED_MODEL.name}{flip} on the rendered frames"
-        )
+        det = perception.shipped_detector(det_cfg)
+        flip = ", mirrored second pass" if det.test_time_flip else ""
+        return det, f"YOLO ONNX detector {perception.SHIPPED_MODEL.name}{flip} on the rendered frames"
     if spec == "classical":
         return perception.make_detector("classical", det_cfg), "classical OpenCV detector on the rendered frames"
     return perception.make_detector(spec, det_cfg), f"detector {spec} on the rendered frames"
