@@ -152,11 +152,12 @@ def fuse_boxes(
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     scores = np.asarray(scores, dtype=np.float64).reshape(-1)
+    classes = None if class_ids is None else np.asarray(class_ids).reshape(-1)
     fused = np.empty((len(keep), 4))
     for row, i in enumerate(keep):
         near = box_iou(boxes[i], boxes) > iou_threshold
-        if class_ids is not None:
-            near &= np.asarray(class_ids).reshape(-1) == class_ids[i]
+        if classes is not None:
+            near &= classes == classes[i]
         near[i] = True
         w = scores[near]
         fused[row] = (boxes[near] * w[:, None]).sum(axis=0) / w.sum()
