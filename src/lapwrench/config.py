@@ -113,6 +113,35 @@ class MotionConfig:
 
 
 @dataclass(frozen=True)
+class EnvelopeConfig:
+    """Task-space envelope of the scope (issue 9), enforced by scaling lower-priority motion.
+
+    Speeds are those of the scope about/along the RCM point; depth is the distance of the tip
+    beyond the RCM point along the shaft; roll is the rotation about the shaft from the start
+    pose. Each wall is approached at most at its deceleration, so the hand meets a soft wall.
+    """
+
+    enabled: bool = True
+    pivot_speed_max: float = _positive(default=0.5)  # rad/s, angular speed of the shaft about p_R
+    pivot_deceleration: float = _positive(default=4.0)  # rad/s^2
+    insertion_speed_max: float = _positive(default=0.05)  # m/s along the shaft
+    insertion_deceleration: float = _positive(default=0.5)  # m/s^2
+    depth_min: float = _positive(default=0.03)  # m of scope beyond p_R
+    depth_max: float = _positive(default=0.12)  # m of scope beyond p_R
+    roll_range: float = _positive(default=1.5708)  # rad, |roll| about the shaft from the start pose
+    roll_speed_max: float = _positive(default=1.0)  # rad/s
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Bounds the safety supervisor checks on *measured* state; each one holds the arm with an alarm."""
+
+    max_rcm_error: float = _positive(default=0.005)  # m, p_R to the scope axis at the measured joints
+    depth_tolerance: float = _nonnegative(default=0.005)  # m beyond the envelope's depth range
+    max_residual_force: float = _positive(default=20.0)  # N, |ΔF| (eq 19): the scope's force on the wall
+
+
+@dataclass(frozen=True)
 class InputsConfig:
     max_rcm_error: float = _positive(default=0.02)
     max_image_age: float = _positive(default=0.2)
@@ -130,6 +159,8 @@ class Config:
     viscous: ViscousConfig = field(default_factory=ViscousConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
     inputs: InputsConfig = field(default_factory=InputsConfig)
+    envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
 
     def replace(self, **sections: dict[str, Any]) -> Config:
         """A copy with some values changed, e.g. ``cfg.replace(tracking={"ramp": "c1"})``; validated."""
@@ -207,6 +238,15 @@ def _check_consistency(cfg: Config) -> None:
         raise ConfigError("config key 'scope.handle_offset' must be shorter than 'scope.length'")
     if not cfg.scope.oblique_angle_deg < 90.0:
         raise ConfigError("config key 'scope.oblique_angle_deg' must be below 90")
+    env = cfg.envelope
+    if not env.depth_min < env.depth_max:
+        raise ConfigError(
+            f"config key 'envelope.depth_max' ({env.depth_max}) must exceed 'envelope.depth_min' ({env.depth_min})"
+        )
+    if not env.depth_max < cfg.scope.length:
+        raise ConfigError("config key 'envelope.depth_max' must be shorter than 'scope.length'")
+    if not env.roll_range <= math.pi:
+        raise ConfigError(f"config key 'envelope.roll_range' must lie in (0, pi], got {env.roll_range}")
     if not cfg.robot.limit_fraction <= 1.0:
         raise ConfigError(f"config key 'robot.limit_fraction' must lie in (0, 1], got {cfg.robot.limit_fraction}")
 

@@ -79,6 +79,7 @@ class TickResult:
     contacts: int
     mode: Mode
     residual_lateral: Vec
+    residual: Vec | None = None  # ΔF (eq 19) in {B}, N; None when the F/T or the force estimate is missing
     events: list[InputEvent] = field(default_factory=list)
 
     @property
@@ -198,6 +199,7 @@ class Controller:
                 F_c,
             ),
             residual_lateral=residual_lateral,
+            residual=residual,
             events=inputs.events,
         )
 

@@ -21,6 +21,11 @@ def rcm_error(kin: Kinematics, p_R: Vec) -> Vec:
     return kin.P @ (p_R - kin.p_E)
 
 
+def insertion_depth(kin: Kinematics, p_R: Vec, length: float) -> float:
+    """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
+    return length - float(kin.d_z @ (p_R - kin.p_E))
+
+
 def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """Eq (28): J_R = ∂e_R/∂θ (3 x n), analytic.
 
