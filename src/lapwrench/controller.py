@@ -80,6 +80,8 @@ class TickResult:
     mode: Mode
     residual_lateral: Vec
     residual: Vec | None = None  # ΔF (eq 19) in {B}, N; None when the F/T or the force estimate is missing
+    limits_active: tuple[str, ...] = ()  # constraints saturated this tick: "joint3", "depth_max", "pivot_speed", ...
+    rcm_infeasible: bool = False  # the RCM task could not be kept inside the limits: the controller is stopping
     events: list[InputEvent] = field(default_factory=list)
 
     @property
