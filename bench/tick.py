@@ -1,8 +1,11 @@
 """Benchmark: one full controller tick against Pinocchio's computeAllTerms on the same model.
 
 The tick runs all four wrenches (interaction, tracking, RCM, viscous), the adaptive RCM update,
-fusion, integration and the limit shaper, with every sensor present and valid. Both are timed in
-the same run; the ratio is the machine-independent figure. Last line: one JSON object.
+fusion, integration and the limits that keep the RCM task (motion/saturation.py), with every sensor
+present and valid. The same ticks are timed with the old per-joint clamp in place of the saturation
+step, once with a light hand and once with a 30 N axial push that keeps the envelope's insertion
+walls active, to show what the saturation costs. Everything is timed in the same run; the ratios
+are the machine-independent figures. Last line: one JSON object.
 
     python bench/tick.py [--ticks N] [--robot panda|fr3]
 """
@@ -16,8 +19,9 @@ import time
 import numpy as np
 import pinocchio as pin
 
-from lapwrench.config import load
+from lapwrench.config import Config, load
 from lapwrench.controller import Controller
+from lapwrench.motion.saturation import SaturationResult
 from lapwrench.sensors import (
     ForceTorqueReading,
     InstrumentObservation,
@@ -33,37 +37,64 @@ def percentiles_us(samples_ns: list[int]) -> tuple[float, float]:
     return float(np.percentile(a, 50)), float(np.percentile(a, 99))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--ticks", type=int, default=20000)
-    ap.add_argument("--robot", default="panda", choices=["panda", "fr3"])
-    args = ap.parse_args()
+def _per_joint_clamp(ctrl: Controller) -> None:
+    """Replace the saturation step by the old per-joint clamp (the reference for its cost)."""
 
-    cfg = load().replace(robot={"kind": args.robot})
+    def clamp(kin, geo, Minv, a_d, bounds, t):  # type: ignore[no-untyped-def]
+        return SaturationResult(np.clip(a_d, *bounds), (), (), True)
+
+    ctrl._saturate = clamp  # type: ignore[method-assign]
+
+
+def time_ticks(cfg: Config, ticks: int, push_n: float, saturation: bool) -> tuple[list[int], float]:
+    """Tick times (ns) with a moving hand force (plus ``push_n`` N along the shaft), a moving
+    instrument and a residual force; and the fraction of ticks in which a limit was active."""
     ctrl = Controller(cfg)
     ctrl.reset(DEFAULT_Q0)
+    if not saturation:
+        _per_joint_clamp(ctrl)
     rng = np.random.default_rng(0)
     tactile = TactileReading(np.full(64, 62.5))
     clock = time.perf_counter_ns
-
-    # warm up, then time ticks with a moving hand force, a moving instrument and a residual force
     tick_ns: list[int] = []
-    for k in range(args.ticks + 1000):
+    active = 0
+    for k in range(ticks + 1000):
         t = k * ctrl.dt
+        # alternate the axial push so the scope keeps moving between the depth walls
+        axial = push_n * (1.0 if (k // 3000) % 2 == 0 else -1.0)
+        force = np.array([4.0 * np.sin(t), 3.0, axial]) + 0.05 * rng.standard_normal(3)
         frame = SensorFrame(
             t,
-            ForceTorqueReading(np.array([4.0 * np.sin(t), 3.0, 0.5]) + 0.05 * rng.standard_normal(3), np.zeros(3), t),
+            ForceTorqueReading(force, np.zeros(3), t),
             tactile,
             InstrumentObservation(np.array([[480.0 + 50 * np.sin(t), 300.0], [150.0, 200.0]]), t),
             RobotReading(ctrl.ref.q, ctrl.ref.dq, np.array([7.0, 0.0, 0.0]), t),
         )
         t0 = clock()
-        ctrl.tick(frame)
+        res = ctrl.tick(frame)
         dt_ns = clock() - t0
         if k >= 1000:
             tick_ns.append(dt_ns)
+            active += bool(res.limits_active)
+    return tick_ns, active / ticks
 
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--ticks", type=int, default=20000)
+    ap.add_argument("--robot", default="panda", choices=["panda", "fr3"])
+    args = ap.parse_args()
+    if args.ticks < 100:
+        ap.error("--ticks must be at least 100")
+
+    cfg = load().replace(robot={"kind": args.robot})
+    ctrl = Controller(cfg)
+    tick_ns, _ = time_ticks(cfg, args.ticks, 0.0, True)
+    clamp_ns, _ = time_ticks(cfg, args.ticks, 0.0, False)
+    push_ns, push_active = time_ticks(cfg, args.ticks, 30.0, True)
+    push_clamp_ns, _ = time_ticks(cfg, args.ticks, 30.0, False)
     model, data = ctrl.model.model, ctrl.model.data
+    clock = time.perf_counter_ns
     cat_ns: list[int] = []
     q = DEFAULT_Q0.copy()
     v = 0.1 * np.ones(7)
@@ -76,11 +107,17 @@ def main() -> None:
 
     tick50, tick99 = percentiles_us(tick_ns)
     cat50, cat99 = percentiles_us(cat_ns)
+    clamp50, clamp99 = percentiles_us(clamp_ns)
+    push50, push99 = percentiles_us(push_ns)
+    pclamp50, pclamp99 = percentiles_us(push_clamp_ns)
     print(f"robot: {args.robot}, ticks: {args.ticks}")
     print(f"controller tick      p50 {tick50:8.1f} us   p99 {tick99:8.1f} us")
     print(f"computeAllTerms      p50 {cat50:8.1f} us   p99 {cat99:8.1f} us")
     print(f"ratio tick/CAT       p50 {tick50 / cat50:8.1f} x    p99 {tick99 / cat99:8.1f} x")
-    print("target: tick p99 <= 100 us, i.e. <= 20x computeAllTerms")
+    print(f"per-joint clamp tick p50 {clamp50:8.1f} us   p99 {clamp99:8.1f} us (the old shaper, same demand)")
+    print(f"30 N axial push      p50 {push50:8.1f} us   p99 {push99:8.1f} us ({push_active:.0%} of ticks at a limit)")
+    print(f"  per-joint clamp    p50 {pclamp50:8.1f} us   p99 {pclamp99:8.1f} us")
+    print(f"saturation adds      p99 {tick99 - clamp99:8.1f} us, {push99 - pclamp99:8.1f} us pushing (target <= 50 us)")
     print(
         json.dumps(
             {
@@ -91,6 +128,12 @@ def main() -> None:
                 "compute_all_terms_p99_us": round(cat99, 2),
                 "tick_over_cat_p50_x": round(tick50 / cat50, 2),
                 "tick_over_cat_p99_x": round(tick99 / cat99, 2),
+                "clamp_tick_p99_us": round(clamp99, 2),
+                "push_tick_p99_us": round(push99, 2),
+                "push_clamp_tick_p99_us": round(pclamp99, 2),
+                "push_limit_active_fraction": round(push_active, 3),
+                "saturation_added_p99_us": round(tick99 - clamp99, 2),
+                "saturation_added_push_p99_us": round(push99 - pclamp99, 2),
             }
         )
     )

@@ -2,27 +2,70 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 import numpy as np
 
 from lapwrench.spatial import Mat, Vec, Wrench
 
+# Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
+RCOND = 1e-10
 
-def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None) -> Mat:
+
+def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None, rcond: float = RCOND) -> Mat:
     """Eq (4): J⁺ = M⁻¹ Jᵀ (J M⁻¹ Jᵀ)⁻¹, the mass-matrix-weighted (dynamically consistent) inverse.
 
     If the task has a known null direction ``n`` (a unit vector with nᵀ J = 0, e.g. d_z for the
     lateral RCM task), J M⁻¹ Jᵀ is singular along it and its pseudo-inverse is computed exactly
     as (J M⁻¹ Jᵀ + n nᵀ)⁻¹ - n nᵀ.
+
+    Without one, (J M⁻¹ Jᵀ)⁻¹ is :func:`regularised_inverse`: the printed inverse whenever
+    J M⁻¹ Jᵀ is well conditioned (smallest eigenvalue >= ``rcond`` x the largest), a damped one
+    otherwise. The printed RCM task (eq 28) needs it: its J_R has rank 2 at e_R = 0, where
+    d_zᵀ J_R = -(d_z x e_R)ᵀ J_Eω vanishes, and the smallest eigenvalue of J_R M⁻¹ J_Rᵀ scales as
+    |e_R|² (about 1e-10 of the largest at |e_R| = 10 µm).
     """
     A = J @ Minv @ J.T
     if null_direction is None:
-        A_inv = np.linalg.inv(A)
+        A_inv = regularised_inverse(A, rcond)
     else:
         nn = np.outer(null_direction, null_direction)
         A_inv = np.linalg.inv(A + nn) - nn
     return Minv @ J.T @ A_inv
+
+
+def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
+    """Inverse of a symmetric positive semi-definite A, damped along its near-null eigenvectors.
+
+    With A = U diag(λ) Uᵀ and δ = ``rcond`` λ_max, each eigenvalue is inverted as
+
+        f(λ) = 1/λ          λ >= δ
+        f(λ) = λ / δ²       λ <  δ     (damped least squares λ / (λ² + μ²) with μ² = δ² - λ²)
+
+    f is continuous at δ, and f(0) = 0: at an exact singularity A⁻¹ is replaced by the
+    Moore-Penrose pseudo-inverse, so J⁺ J stays the M-orthogonal projector on the rows of J that
+    are left. A = 0 gives 0. When the Frobenius condition number ‖A‖ ‖A⁻¹‖ (>= λ_max / λ_min)
+    is at most 1/``rcond``, every λ >= δ and A⁻¹ is returned as ``inv(A)``, the printed formula.
+    """
+    try:
+        A_inv = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return _damped_inverse(A, rcond)
+    if rcond * math.sqrt(np.vdot(A, A) * np.vdot(A_inv, A_inv)) <= 1.0:  # False on inf/nan
+        return A_inv
+    return _damped_inverse(A, rcond)
+
+
+def _damped_inverse(A: Mat, rcond: float) -> Mat:
+    """U diag(f(λ)) Uᵀ with f of :func:`regularised_inverse`."""
+    lam, U = np.linalg.eigh(A)
+    if not lam[-1] > 0.0:
+        return np.zeros_like(A)
+    delta = rcond * lam[-1]
+    lam_c = np.maximum(lam, 0.0)
+    f = np.where(lam_c >= delta, 1.0 / np.maximum(lam_c, delta), lam_c / delta**2)
+    return (U * f) @ U.T
 
 
 def nullspace_projector(J: Mat, J_pinv: Mat) -> Mat:

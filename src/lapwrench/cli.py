@@ -128,7 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="the main job: the paper's experiments in simulation, written to a report")
     demo.add_argument("--out", default="reports/latest", help="report folder (default reports/latest)")
     demo.add_argument(
-        "--scenarios", nargs="+", metavar="NAME", help="grip, rcm-disturbance, needle-search, workflow (default: all)"
+        "--scenarios",
+        nargs="+",
+        metavar="NAME",
+        help="grip, rcm-disturbance, needle-search, workflow, hard-push (default: all)",
     )
     demo.add_argument("--config", help="YAML configuration or preset for every scenario (default: the paper's)")
     demo.add_argument("--tracking-config", help="configuration for needle-search and workflow")

@@ -89,6 +89,14 @@ class RcmConfig:
 
 @dataclass(frozen=True)
 class AdaptiveRcmConfig:
+    """Eq (18)-(26) and the motion gate of the estimate-driven term (see :mod:`lapwrench.rcm.adaptive`).
+
+    ``gate: speed`` weights the -α F_re⊥ term of eq (24) by w ∈ [0, 1], which falls from 1 at
+    ``gate_soft`` x a threshold to 0 at the threshold, for each of the scope's pivot angular speed,
+    flange linear speed and their (filtered) accelerations; w re-opens over ``gate_release_time``.
+    ``gate: none`` is the paper's law as printed (w = 1 always).
+    """
+
     enabled: bool = True
     F_op: float = _positive(default=10.0)
     gamma1: float = _positive(default=5.0)
@@ -97,12 +105,31 @@ class AdaptiveRcmConfig:
     alpha: float = _positive(default=0.003)
     beta: float = _positive(default=0.05)
     epsilon: float = _positive(default=5e-4)
+    gate: Literal["speed", "none"] = "speed"
+    gate_angular_speed: float = _positive(default=0.2)  # rad/s, |P ω_E|: no adaptation above
+    gate_linear_speed: float = _positive(default=0.1)  # m/s, |v_E| of the flange: no adaptation above
+    gate_angular_acceleration: float = _positive(default=2.0)  # rad/s^2, filtered |P ω̇_E|: no adaptation above
+    gate_linear_acceleration: float = _positive(default=2.0)  # m/s^2, filtered |v̇_E|: no adaptation above
+    gate_soft: float = _nonnegative(default=0.5)  # fraction of each threshold where w starts to fall (1: hard gate)
+    gate_filter_time: float = _nonnegative(default=0.02)  # s, time constant of the acceleration filter
+    gate_release_time: float = _nonnegative(default=0.1)  # s, w re-opens from 0 to 1 at most this fast
+
+    def __post_init__(self) -> None:
+        if not self.gate_soft <= 1.0:
+            raise ConfigError(f"config key 'adaptive_rcm.gate_soft' must lie in [0, 1], got {self.gate_soft}")
+        if self.gate == "speed" and self.gate_soft * self.gate_linear_speed < self.alpha * self.F_op:
+            # p_R moves at up to α F_op and the scope follows it: the gate must not throttle that motion
+            raise ConfigError(
+                f"config key 'adaptive_rcm.gate_linear_speed' x 'gate_soft' ({self.gate_soft * self.gate_linear_speed}"
+                f" m/s) must be at least alpha x F_op ({self.alpha * self.F_op} m/s), the fastest adaptation"
+            )
 
 
 @dataclass(frozen=True)
 class ViscousConfig:
     k_t: float = _positive(default=150.0)
-    k_f: float = _positive(default=2.0)
+    k_f: float = _positive(default=150.0)  # N s/m; the paper prints 2 (README, "damping")
+    k_t_unguided: float = _positive(default=2.0)  # N m s, k_t while no hand grips the handle (tracking alone)
 
 
 @dataclass(frozen=True)
@@ -110,6 +137,9 @@ class MotionConfig:
     integrator: Literal["semi_implicit", "explicit"] = "semi_implicit"
     self_motion_damping: float = _nonnegative(default=10.0)
     rcm_task: Literal["lateral", "printed"] = "lateral"
+    joint_limit_zone: float = _nonnegative(default=0.3)  # rad inside each joint limit where self-motion pushes away
+    joint_limit_stiffness: float = _nonnegative(default=20.0)  # N m/rad of that push (0: off)
+    stop_time: float = _positive(default=0.1)  # s, time constant of the null-space brake when the RCM cannot be kept
 
 
 @dataclass(frozen=True)

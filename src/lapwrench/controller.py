@@ -21,8 +21,16 @@ from lapwrench.allocation import (
     weighted_pseudo_inverse,
 )
 from lapwrench.config import Config
+from lapwrench.motion.envelope import Envelope
+from lapwrench.motion.measured_feedback import MeasuredFeedback
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
-from lapwrench.motion.virtual_model import euler_velocity_step, self_motion_damping
+from lapwrench.motion.saturation import LimitRows, SaturationResult, saturate
+from lapwrench.motion.virtual_model import (
+    euler_velocity_step,
+    joint_limit_torque,
+    self_motion_damping,
+    self_motion_projector,
+)
 from lapwrench.rcm.adaptive import AdaptiveRcm, residual_force
 from lapwrench.rcm.geometry import (
     closest_point,
@@ -42,6 +50,9 @@ from lapwrench.wrenches import InteractionWrench, RcmWrench, TrackingWrench, Vis
 from lapwrench.wrenches.base import DampingSource, TaskGeometry, TickContext, WrenchSource
 
 MAX_KEPT_EVENTS = 10_000
+# Ticks in a row in which the RCM task cannot be kept inside the joint limits before the arm stops
+# (a single tick, e.g. a jerk-limited transient, is clipped into the limits and counted).
+INFEASIBLE_TICKS_TO_STOP = 10
 Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
 
 
@@ -106,15 +117,19 @@ class Controller:
         )
         self.interaction = InteractionWrench(cfg.interaction)
         self.tracking = TrackingWrench(cfg.camera, cfg.tracking)
-        self.viscous = ViscousWrench(cfg.viscous)
+        self.viscous = ViscousWrench(cfg.viscous, engaged=lambda: self.interaction.delta > 0.0)
         self.rcm_wrench = RcmWrench(cfg.rcm)
         self.null_sources: list[WrenchSource] = [self.interaction, self.tracking, self.viscous, *extra_sources]
         self.damping_sources = [s for s in self.null_sources if isinstance(s, DampingSource)]
         self.shaper = ReferenceShaper(
             self.model.limits, self.dt, cfg.robot.limit_fraction, cfg.robot.position_margin
         )
+        self.envelope = Envelope(cfg.envelope, cfg.scope.length, self.dt)
+        self.feedback = MeasuredFeedback(self.model, cfg.scope.length, self.dt, 2.0 * cfg.safety.max_rcm_error)
         self.ref: ReferenceState | None = None
         self.rcm: AdaptiveRcm | None = None
+        self.stopping = False  # latched when the RCM task cannot be kept inside the joint limits
+        self.infeasible_ticks = 0
         self.events: deque[InputEvent] = deque(maxlen=MAX_KEPT_EVENTS)
         self.event_counts: Counter[str] = Counter()
 
@@ -132,6 +147,10 @@ class Controller:
         if p_R is None:
             p_R = initial_rcm_point(kin, self.cfg.scope.length, self.cfg.scope.lambda0)
         self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
+        self.envelope.reset(kin)
+        self.feedback.reset()
+        self.stopping = False
+        self.infeasible_ticks = 0
         self.events.clear()
         self.event_counts.clear()
 
@@ -147,10 +166,10 @@ class Controller:
 
         # 2. adaptive RCM point (eq 19-26)
         residual = self._residual(kin, inputs)
-        residual_lateral = self.rcm.update(kin.P, residual, self.dt)
+        residual_lateral = self.rcm.update(kin.P, residual, self.dt, kin.twist_E)
 
         # 3. task geometry (eq 27-36)
-        geo = self._geometry(kin)
+        geo = self._geometry(kin, inputs)
         ctx = TickContext(frame.time, kin, geo, inputs)
 
         # 4. wrenches
@@ -162,9 +181,11 @@ class Controller:
         J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z if lateral else None)
         N_r = nullspace_projector(geo.J_R, J_pinv)
         W_n = nullspace_wrench(null_wrenches, geo.p_G)
-        tau_n = nullspace_torque(geo.J_G, W_n)
-        B_self = self_motion_damping(kin, Minv, self.cfg.motion.self_motion_damping)
-        tau = task_priority_torque(geo.J_R, W_r.force, N_r, tau_n) - B_self @ kin.dq
+        tau_n = np.zeros(7) if self.stopping else nullspace_torque(geo.J_G, W_n)
+        N_E_T = self_motion_projector(kin, Minv)
+        B_self = self_motion_damping(kin, N_E_T, self.cfg.motion.self_motion_damping)
+        tau_self = N_E_T @ self._joint_limit_push(kin.q) - B_self @ kin.dq
+        tau = task_priority_torque(geo.J_R, W_r.force, N_r, tau_n) + tau_self
 
         # 6. integration of the virtual model
         damping = self._damping(geo, N_r) + B_self
@@ -173,8 +194,10 @@ class Controller:
             tau = np.zeros(7)
         dq_next = euler_velocity_step(kin, tau, damping, self.dt, self.cfg.motion.integrator)
 
-        # 7. limits → command
-        self.ref = self.shaper.step(self.ref, dq_next)
+        # 7. limits that keep the RCM task (SNS) → command
+        bounds = self.shaper.acceleration_bounds(self.ref)
+        sat = self._saturate(kin, geo, Minv, (dq_next - kin.dq) / self.dt, bounds, frame.time)
+        self.ref = self.shaper.advance(self.ref, sat.a, bounds)
 
         wrenches = {"rcm": W_r.vector}
         wrenches.update({s.name: w.vector for s, w in zip(self.null_sources, null_wrenches, strict=True)})
@@ -202,6 +225,8 @@ class Controller:
             ),
             residual_lateral=residual_lateral,
             residual=residual,
+            limits_active=tuple(dict.fromkeys(sat.saturated + sat.dropped)),
+            rcm_infeasible=self.stopping,
             events=inputs.events,
         )
 
@@ -212,15 +237,54 @@ class Controller:
             self.events.append(e)
             self.event_counts[e.source] += 1
 
+    def _joint_limit_push(self, q: Vec) -> Vec:
+        """The self-motion's push away from the joint limits (zone measured inside the position margin)."""
+        m = self.cfg.motion
+        if m.joint_limit_stiffness == 0.0:
+            return np.zeros_like(q)
+        return joint_limit_torque(q, self.shaper.q_lo, self.shaper.q_hi, m.joint_limit_zone, m.joint_limit_stiffness)
+
+    def _saturate(
+        self, kin: Kinematics, geo: TaskGeometry, Minv: np.ndarray, a_d: Vec, bounds: tuple[Vec, Vec], t: float
+    ) -> SaturationResult:
+        """Joint limits and the envelope met by changing the lower-priority motion only (motion/saturation.py).
+
+        The task is the RCM error's two lateral rates: J = [x_E  y_E]ᵀ J_R (e_R ⟂ d_z, so the third
+        row carries nothing). If the task itself cannot stay inside the joint limits for
+        ``INFEASIBLE_TICKS_TO_STOP`` ticks in a row (one such tick is clipped into the limits), the
+        controller latches :attr:`stopping`: the cues are switched off and the null-space motion is
+        braked with time constant ``motion.stop_time`` while the RCM task keeps acting, down to rest.
+        """
+        J_task = kin.R_E[:, :2].T @ geo.J_R
+        if self.stopping:
+            a_d = a_d - self._null_brake(J_task, Minv, kin.dq)
+        rows = LimitRows.joint_box(*bounds, self.shaper.lim.acceleration)
+        env = self.envelope.rows(kin, geo.p_R, a_d, self.feedback.depth_offset)
+        if env is not None:
+            rows = LimitRows.stack(rows, env)
+        sat = saturate(a_d, J_task, kin.M, rows)
+        self.infeasible_ticks = 0 if sat.feasible else self.infeasible_ticks + 1
+        if self.infeasible_ticks >= INFEASIBLE_TICKS_TO_STOP and not self.stopping:
+            self.stopping = True
+            self._report([InputEvent(t, "controller", "RCM task cannot be kept inside the joint limits; stopping")])
+        return sat
+
+    def _null_brake(self, J_task: np.ndarray, Minv: np.ndarray, dq: Vec) -> Vec:
+        """N θ̇ / T_stop with N = I - J⁺ J (J⁺ M-weighted): a deceleration of the null-space motion only."""
+        J_pinv = weighted_pseudo_inverse(J_task, Minv)
+        return (dq - J_pinv @ (J_task @ dq)) / self.cfg.motion.stop_time
+
     def _residual(self, kin: Kinematics, inputs: ValidInputs) -> Vec | None:
         """ΔF (eq 19) when both the F/T reading and the robot's force estimate are valid."""
         if inputs.ft is None or inputs.robot is None or inputs.robot.external_force is None:
             return None
         return residual_force(kin.R_H @ inputs.ft.force, inputs.robot.external_force)
 
-    def _geometry(self, kin: Kinematics) -> TaskGeometry:
+    def _geometry(self, kin: Kinematics, inputs: ValidInputs | None = None) -> TaskGeometry:
         assert self.rcm is not None
         p_R, L = self.rcm.p_R, self.cfg.scope.length
+        e_R = rcm_error(kin, p_R)
+        self.feedback.update(None if inputs is None or inputs.robot is None else inputs.robot.q, kin, p_R, e_R)
         lateral = self.cfg.motion.rcm_task == "lateral"
         J_R = lateral_rcm_jacobian(kin, p_R) if lateral else rcm_jacobian(kin, p_R)
         s_star = closest_point_parameter(kin, p_R, L)
@@ -228,13 +292,14 @@ class Controller:
         return TaskGeometry(
             p_R=p_R,
             rcm_velocity=self.rcm.velocity,
-            e_R=rcm_error(kin, p_R),
+            e_R=e_R,
             e_R_rate=rcm_error_rate(kin, J_R, self.rcm.velocity),
             J_R=J_R,
             s_star=s_star,
             p_G=p_G,
             o_G=o_G,
             J_G=closest_point_jacobian(kin, o_G),
+            e_R_offset=self.feedback.e_offset,
         )
 
     def _damping(self, geo: TaskGeometry, N_r: np.ndarray) -> np.ndarray:

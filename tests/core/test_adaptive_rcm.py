@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
-from lapwrench.config import load
+from lapwrench.config import AdaptiveRcmConfig, ConfigError, load
 from lapwrench.rcm.adaptive import AdaptiveRcm, residual_force
 
 CFG = load().adaptive_rcm
@@ -91,3 +92,111 @@ def test_missing_residual_only_leaks() -> None:
     rcm = AdaptiveRcm(CFG, np.zeros(3))
     rcm.update(P, None, DT)
     np.testing.assert_allclose(rcm.p_R, 0.0)
+
+
+# -- the motion gate of the estimate-driven term (issue 9, point 4) --------------------------------
+
+WALL = np.array([-10.0, 0.0, 0.0])  # a lateral residual that moves p_R along +x
+
+
+def _twist(pivot: float = 0.0, linear: float = 0.0, roll: float = 0.0) -> np.ndarray:
+    """[ω; v] of {E}: pivot about x (orthogonal to the shaft), roll about the shaft, flange speed along y."""
+    return np.concatenate([np.array([pivot, 0.0, 0.0]) + roll * AXIS, [0.0, linear, 0.0]])
+
+
+def _run(cfg: AdaptiveRcmConfig, twists: list[np.ndarray | None]) -> AdaptiveRcm:
+    rcm = AdaptiveRcm(cfg, np.zeros(3))
+    for tw in twists:
+        rcm.update(P, WALL, DT, tw)
+    return rcm
+
+
+@pytest.mark.parametrize(
+    "twist",
+    [
+        _twist(pivot=1.01 * CFG.gate_angular_speed),
+        _twist(pivot=-3.0),
+        _twist(linear=1.01 * CFG.gate_linear_speed),
+    ],
+    ids=["pivot-just-above", "pivot-fast", "flange-just-above"],
+)
+def test_gate_stops_adaptation_above_a_speed_threshold(twist: np.ndarray) -> None:
+    rcm = _run(CFG, [twist] * 500)
+    assert rcm.gate_weight == 0.0
+    np.testing.assert_allclose(rcm.p_R, 0.0)  # the anchor is p_R: the leakage has nothing to pull
+
+
+@pytest.mark.parametrize(
+    "twist",
+    [
+        _twist(pivot=0.99 * CFG.gate_soft * CFG.gate_angular_speed),
+        _twist(linear=0.99 * CFG.gate_soft * CFG.gate_linear_speed),
+        _twist(roll=3.0),  # rolling about the shaft is not pivoting
+    ],
+    ids=["pivot-below", "flange-below", "roll"],
+)
+def test_gate_allows_adaptation_below_the_thresholds_at_the_paper_rate(twist: np.ndarray) -> None:
+    gated = _run(CFG, [twist] * 500)
+    paper = _run(CFG, [None] * 500)
+    assert gated.gate_weight == 1.0
+    assert gated.p_R[0] > 1e-3
+    np.testing.assert_array_equal(gated.p_R, paper.p_R)
+
+
+def test_gate_weight_is_smooth_between_the_soft_point_and_the_threshold() -> None:
+    lim, soft = CFG.gate_angular_speed, CFG.gate_soft
+    weights = []
+    for x in np.linspace(soft * lim, lim, 11):
+        rcm = _run(CFG, [_twist(pivot=x)])
+        weights.append(rcm.gate_weight)
+    assert weights[0] == 1.0 and weights[-1] == pytest.approx(0.0, abs=1e-12)
+    assert weights[5] == pytest.approx(0.5)
+    assert all(a > b for a, b in itertools.pairwise(weights))
+
+
+def test_gate_closes_on_acceleration_below_the_speed_thresholds() -> None:
+    cfg = load().replace(adaptive_rcm={"gate_linear_speed": 1.0}).adaptive_rcm
+    a = 2.5 * cfg.gate_linear_acceleration  # the flange accelerates at 5 m/s^2 for 40 ms
+    rcm = _run(cfg, [_twist(linear=a * DT * k) for k in range(40)])
+    speed, accel = rcm.gate.signals[1], rcm.gate.signals[3]
+    assert speed < cfg.gate_soft * cfg.gate_linear_speed  # the speed alone would leave w = 1
+    assert accel == pytest.approx(a * (1 - math.exp(-0.039 / cfg.gate_filter_time)), rel=0.05)
+    assert accel > cfg.gate_linear_acceleration
+    assert rcm.gate_weight == 0.0
+
+
+def test_gate_reopens_no_faster_than_the_release_time_after_the_motion() -> None:
+    rcm = _run(CFG, [_twist(pivot=1.0)] * 100)
+    assert rcm.gate_weight == 0.0
+    held = rcm.p_R.copy()
+    weights = []
+    for _ in range(round(1.0 / DT)):  # the pivot stops at once: a deceleration, then rest
+        rcm.update(P, WALL, DT, _twist())
+        weights.append(rcm.gate_weight)
+    steps = np.diff([0.0, *weights])
+    assert np.all(steps <= DT / CFG.gate_release_time + 1e-12)
+    assert weights[round(CFG.gate_release_time / DT)] < 1.0  # the stop's deceleration held it closed a while
+    assert weights[-1] == 1.0
+    assert rcm.p_R[0] > held[0] + 1e-3  # adapting again
+
+
+def test_paper_option_ignores_the_motion() -> None:
+    paper = load().replace(adaptive_rcm={"gate": "none"}).adaptive_rcm
+    fast = _run(paper, [_twist(pivot=3.0, linear=1.0)] * 500)
+    at_rest = _run(paper, [None] * 500)
+    assert fast.gate_weight == 1.0
+    np.testing.assert_array_equal(fast.p_R, at_rest.p_R)
+    # and it is eq (24) exactly: the same figure as the constant-residual test above
+    rate0 = paper.alpha * _phi(10.0)
+    T = 0.5
+    assert fast.p_R[0] == pytest.approx(rate0 / paper.beta * (1 - math.exp(-paper.beta * T)), rel=2e-3)
+
+
+def test_gate_config_is_validated() -> None:
+    with pytest.raises(ConfigError, match="gate_soft"):
+        load().replace(adaptive_rcm={"gate_soft": 1.5})
+    with pytest.raises(ConfigError, match="gate_linear_speed"):
+        load().replace(adaptive_rcm={"gate_linear_speed": 0.05})  # x 0.5 is below alpha F_op = 0.03 m/s
+    with pytest.raises(ConfigError, match="gate"):
+        load().replace(adaptive_rcm={"gate": "fast"})
+    assert load().replace(adaptive_rcm={"gate": "none", "gate_linear_speed": 0.05}).adaptive_rcm.gate == "none"

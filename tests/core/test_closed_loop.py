@@ -70,8 +70,8 @@ def _instrument_at(cfg: Config, pixels: float) -> np.ndarray:
 
 @pytest.mark.parametrize(
     ("preset", "duration"),
-    [({}, 60.0), ({"viscous": {"k_t": 2.0, "k_f": 150.0}}, 3.0)],
-    ids=["paper-damping", "swapped-damping"],
+    [({"viscous": {"k_t_unguided": 150.0, "k_f": 2.0}}, 60.0), ({}, 3.0)],
+    ids=["paper-damping", "default-damping"],
 )
 def test_instrument_150px_off_centre_is_brought_inside_eps1(preset: dict, duration: float) -> None:
     cfg = load().replace(**preset)
@@ -89,9 +89,20 @@ def test_instrument_150px_off_centre_is_brought_inside_eps1(preset: dict, durati
 
 
 def test_printed_direction_with_paper_damping_retracts_the_scope() -> None:
-    """Why ``tracking.direction`` defaults to the image-plane reading (see tracking_direction)."""
-    cfg = load().replace(tracking={"direction": "printed"})
-    point = _instrument_at(cfg, 150.0)
-    _, log = run_virtual(cfg, 1.0, instruments=lambda t: point[None])
-    depth = [np.linalg.norm(r.p_R - e) for r, (e, _) in zip(log.results, log.axis_points, strict=True)]
-    assert depth[-1] - depth[0] > 0.05  # the flange moved 5+ cm away from the RCM: the scope was pulled out
+    """Why ``tracking.direction`` defaults to the image-plane reading (see tracking_direction),
+    and how the envelope's depth wall stops the retraction at ``envelope.depth_min``."""
+    point = None
+    for enabled in (False, True):
+        cfg = load().replace(
+            tracking={"direction": "printed"},
+            envelope={"enabled": enabled},
+            viscous={"k_f": 2.0, "k_t_unguided": 150.0},  # the paper's table
+        )
+        point = _instrument_at(cfg, 150.0) if point is None else point
+        _, log = run_virtual(cfg, 1.0, instruments=lambda t, p=point: p[None])
+        depth = [np.linalg.norm(r.p_R - e) for r, (e, _) in zip(log.results, log.axis_points, strict=True)]
+        tip_depth = cfg.scope.length - depth[-1]
+        if not enabled:
+            assert depth[-1] - depth[0] > 0.05  # the flange moved 5+ cm away from the RCM: the scope was pulled out
+        else:
+            assert cfg.envelope.depth_min - 1e-4 <= tip_depth < cfg.envelope.depth_min + 0.003

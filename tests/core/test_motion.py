@@ -8,7 +8,7 @@ import pytest
 from lapwrench.config import load
 from lapwrench.controller import Controller
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
-from lapwrench.motion.virtual_model import self_motion_damping
+from lapwrench.motion.virtual_model import joint_limit_torque, self_motion_damping, self_motion_projector
 from lapwrench.robot.limits import franka_limits, limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.virtual import DEFAULT_Q0
@@ -61,7 +61,7 @@ def _damped_step_matrices(ctrl: Controller):
 
     Minv = np.linalg.inv(kin.M)
     N_r = nullspace_projector(geo.J_R, weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z))
-    B = ctrl._damping(geo, N_r) + self_motion_damping(kin, Minv, 10.0)
+    B = ctrl._damping(geo, N_r) + self_motion_damping(kin, self_motion_projector(kin, Minv), 10.0)
     dt = ctrl.dt
     explicit = np.eye(7) - dt * Minv @ B
     implicit = np.linalg.solve(kin.M + dt * B, kin.M)
@@ -69,7 +69,7 @@ def _damped_step_matrices(ctrl: Controller):
 
 
 def test_explicit_euler_is_unstable_with_the_paper_damping_and_semi_implicit_is_not() -> None:
-    ctrl = Controller(load())
+    ctrl = Controller(load().replace(viscous={"k_f": 2.0, "k_t_unguided": 150.0}))
     ctrl.reset(DEFAULT_Q0)
     explicit, implicit = _damped_step_matrices(ctrl)
     assert np.max(np.abs(np.linalg.eigvals(explicit))) > 1.0
@@ -81,7 +81,25 @@ def test_self_motion_damping_does_not_move_the_end_effector() -> None:
     rng = np.random.default_rng(0)
     kin = model.kinematics(DEFAULT_Q0, rng.standard_normal(7))
     Minv = np.linalg.inv(kin.M)
-    B = self_motion_damping(kin, Minv, 10.0)
+    B = self_motion_damping(kin, self_motion_projector(kin, Minv), 10.0)
     acc_E = kin.J_E @ Minv @ B @ kin.dq
     assert np.linalg.norm(acc_E) < 1e-6 * np.linalg.norm(kin.J_E) * np.linalg.norm(Minv @ B @ kin.dq)
     assert kin.dq @ B @ kin.dq >= 0.0
+
+
+def test_joint_limit_push_acts_only_inside_the_zone_and_only_on_the_self_motion() -> None:
+    model = RobotModel("panda")
+    lim = model.limits
+    lo, hi = lim.position_lower, lim.position_upper
+    mid = 0.5 * (lo + hi)
+    assert not joint_limit_torque(mid, lo, hi, 0.3, 20.0).any()
+    q = DEFAULT_Q0.copy()
+    q[3] = lo[3] + 0.1  # 0.2 rad into the lower zone of joint 4
+    q[5] = hi[5] - 0.05  # 0.25 rad into the upper zone of joint 6
+    g = joint_limit_torque(q, lo, hi, 0.3, 20.0)
+    np.testing.assert_allclose(g, [0, 0, 0, 4.0, 0, -5.0, 0], atol=1e-9)
+    kin = model.kinematics(q, np.zeros(7))
+    Minv = np.linalg.inv(kin.M)
+    tau = self_motion_projector(kin, Minv) @ g
+    assert np.linalg.norm(kin.J_E @ Minv @ tau) < 1e-6 * np.linalg.norm(Minv @ g)
+    assert g @ Minv @ tau > 0.0  # what is left still pushes away from the limits

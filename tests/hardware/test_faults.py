@@ -1,8 +1,9 @@
 """Fault injection on the simulated robot and on franky-sim: the same scenarios through the same loop.
 
 Each scenario runs the full controller with a scripted hand and injects one fault: bad inputs
-(NaN, inf, out-of-range, stale), a NaN command, a jump in the command, an RCM error over the
-bound, deadline misses, and a stop requested while moving. Every run must end at rest with every
+(NaN, inf, out-of-range, stale), a NaN command, a jump in the command, a measured RCM error over
+the bound, an exception inside the controller's tick, deadline misses, and a stop requested while
+moving. Every run must end at rest with every
 command inside the Franka limits as libfranka differentiates them.
 """
 
@@ -44,6 +45,7 @@ SCENARIOS: dict[str, dict[str, Any]] = {
         "command_hook": lambda k, q: q + np.r_[0.08 * quintic(k, 200, 800), 0, 0, 0, 0, 0, 0],
         "alarm": "rcm_error",
     },
+    "controller_error": {"tick_raises_at": 300, "alarm": "controller_error: LinAlgError: Singular matrix"},
     "deadline_misses": {
         "compute_hook": lambda k: time.sleep(0.0015) if 300 <= k < 340 else None,
         "sup": {"cycle_budget": 0.001, "max_consecutive_misses": 10},
@@ -51,6 +53,19 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     },
     "stop_while_moving": {"stop_at": 0.6, "alarm": None},
 }
+
+
+def break_tick(loop: Any, at: int) -> None:
+    """The controller's tick raises (as eq 4's inverse did at e_R = 0) from its ``at``-th call on."""
+    tick, calls = loop.controller.tick, [0]
+
+    def broken(frame: Any) -> Any:
+        calls[0] += 1
+        if calls[0] > at:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return tick(frame)
+
+    loop.controller.tick = broken
 
 
 def run_scenario(robot: Any, cfg: Config, name: str) -> tuple[Any, Any]:
@@ -66,6 +81,8 @@ def run_scenario(robot: Any, cfg: Config, name: str) -> tuple[Any, Any]:
             command_hook=sc.get("command_hook"),
             compute_hook=sc.get("compute_hook"),
         )
+        if "tick_raises_at" in sc:
+            break_tick(loop, sc["tick_raises_at"])
         if "stop_at" in sc:
             t_stop = sc["stop_at"]
             inner: Callable[[int, np.ndarray], np.ndarray] | None = loop.command_hook
@@ -99,6 +116,9 @@ def check_outcome(name: str, stats: Any, log: Any, cfg: Config, model: RobotMode
     assert usage["position_excess"] == 0.0
     for k in ("velocity", "acceleration", "jerk"):
         assert usage[k] <= 1.0, (name, usage)
+    if name == "controller_error":
+        assert "controller_error" in log.kinds() and stats.robot_time < 1.8
+        assert np.isnan(stats.rcm_error_reference[-1])  # no controller output after the failure
     if name == "rcm_over_bound":
         # held: the alarm fired within the bound plus what one stop adds, not after a long drift
         assert stats.rcm_error_measured.max() < 0.02

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState
+from lapwrench.config import load
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState, measure_scope
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
@@ -145,3 +146,104 @@ def test_config_validation() -> None:
         SupervisorConfig(check_fraction=1.5)
     with pytest.raises(ValueError):
         SupervisorConfig(joint_stop_margin=0.1, joint_warn_margin=0.05)
+
+
+# -- measured-state watches (issue 9): each one holds with an alarm naming the quantity and value --
+def moving(limits, seed: int = 5, ticks: int = 300) -> tuple[SafetySupervisor, np.ndarray, list[np.ndarray]]:
+    """A supervisor (from the shipped config) passing a shaped full-speed reference: the arm is moving."""
+    s = SafetySupervisor(limits, DT, SupervisorConfig.from_config(load(), max_consecutive_misses=0))
+    s.start(DEFAULT_Q0)
+    shaper = ReferenceShaper(limits, DT, 0.9, 0.05)
+    st = ReferenceState(DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7))
+    target = np.random.default_rng(seed).uniform(-1, 1, 7) * limits.velocity
+    cmds = []
+    for _ in range(ticks):
+        st = shaper.step(st, target)
+        cmds.append(s.filter(0.0, st.q, rcm_error=0.001, depth=0.058, residual=np.array([1.0, 2.0, 0.0])))
+    assert not s.alarm and np.max(np.abs(s.command_state[1])) > 0.1
+    return s, st.q, cmds
+
+
+def assert_stopped_at_rest_inside_limits(s: SafetySupervisor, q: np.ndarray, cmds: list[np.ndarray], limits) -> None:
+    run_to_rest(s, q + 0.3, cmds)  # commands after the hold are ignored, however far they jump
+    usage = limit_usage(np.array(cmds), DT, limits, DEFAULT_Q0)
+    assert usage["position_excess"] == 0 and max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1, usage
+    assert np.allclose(cmds[-1], cmds[-2]) and np.allclose(cmds[-2], cmds[-3])
+    _q, v, a = s.command_state
+    assert np.allclose(v, 0) and np.allclose(a, 0)
+
+
+HOLDS = {
+    "rcm_error": ({"rcm_error": 0.0062}, "rcm_error: measured RCM error 6.20 mm > 5.00 mm; holding"),
+    "depth_below": ({"depth": 0.020}, "insertion_depth: measured insertion depth 20.0 mm outside [25.0, 125.0] mm"),
+    "depth_above": ({"depth": 0.131}, "insertion_depth: measured insertion depth 131.0 mm outside [25.0, 125.0] mm"),
+    "residual": (
+        {"residual": np.array([12.0, -16.0, 15.0])},
+        "residual_force: measured residual force |ΔF| 25.0 N > 20.0 N",
+    ),
+    "rcm_nan": ({"rcm_error": np.nan}, "rcm_error: measured RCM error nan mm"),
+    "rcm_inf": ({"rcm_error": np.inf}, "rcm_error: measured RCM error inf mm"),
+    "depth_nan": ({"depth": np.nan}, "insertion_depth: measured insertion depth nan mm"),
+    "residual_nan": ({"residual": np.array([np.nan, 0.0, 0.0])}, "residual_force: measured residual force |ΔF| nan N"),
+    "joints_nan": ({"q_measured": np.r_[DEFAULT_Q0[:3], np.nan, DEFAULT_Q0[4:]]}, "joints_nonfinite: measured joints"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOLDS))
+def test_measured_state_holds_with_an_alarm_naming_it(limits, case: str) -> None:
+    measured, reason = HOLDS[case]
+    s, q, cmds = moving(limits)
+    kw = {"rcm_error": 0.001, "depth": 0.058, "residual": np.zeros(3), **measured}
+    cmds.append(s.filter(0.3, q, **kw))
+    assert s.alarm and s.alarm_reason.startswith(reason), s.alarm_reason
+    assert s.state is SupervisorState.STOPPING  # a jerk-limited stop, not a jump to a halt
+    assert s.replaced_commands == 0
+    assert_stopped_at_rest_inside_limits(s, q, cmds, limits)
+
+
+@pytest.mark.parametrize(
+    "measured",
+    [
+        {"rcm_error": 0.005, "depth": 0.025, "residual": np.array([20.0, 0.0, 0.0])},  # on the bounds
+        {"rcm_error": 0.0, "depth": 0.125, "residual": None},  # no ΔF (a sensor missing): skipped
+        {"rcm_error": None, "depth": None, "residual": None},
+    ],
+)
+def test_measured_state_inside_the_bounds_passes(limits, measured: dict) -> None:
+    s = started(limits)
+    assert np.array_equal(s.filter(0.0, DEFAULT_Q0, q_measured=DEFAULT_Q0, **measured), DEFAULT_Q0)
+    assert not s.alarm
+
+
+def test_measured_bounds_come_from_the_yaml_config() -> None:
+    cfg = load().replace(safety={"max_rcm_error": 0.003, "depth_tolerance": 0.002, "max_residual_force": 8.0})
+    cfg = cfg.replace(envelope={"depth_min": 0.04, "depth_max": 0.1})
+    c = SupervisorConfig.from_config(cfg, cycle_budget=0.002)
+    assert (c.max_rcm_error, c.max_residual_force, c.cycle_budget) == (0.003, 8.0, 0.002)
+    assert c.depth_min == pytest.approx(0.038) and c.depth_max == pytest.approx(0.102)
+    assert SupervisorConfig() == SupervisorConfig.from_config(load())  # the defaults are the shipped YAML's
+    assert SupervisorConfig.from_config(cfg, max_rcm_error=0.01).max_rcm_error == 0.01
+    with pytest.raises(ValueError):
+        SupervisorConfig(depth_min=0.1, depth_max=0.05)
+    with pytest.raises(ValueError):
+        SupervisorConfig(max_residual_force=float("nan"))
+
+
+def test_measure_scope_at_the_measured_joints() -> None:
+    """Distance from p_R to the axis and tip depth beyond p_R, against the tick's kinematics."""
+    model = RobotModel("panda")
+    L = model.length
+    rng = np.random.default_rng(9)
+    for _ in range(20):
+        q = DEFAULT_Q0 + rng.uniform(-0.3, 0.3, 7)
+        kin = model.kinematics(q, np.zeros(7))
+        lateral = np.cross(kin.d_z, rng.normal(size=3))
+        lateral *= 0.006 / np.linalg.norm(lateral)
+        p_R = kin.p_E + 0.7 * L * kin.d_z + lateral
+        m = measure_scope(model, q, p_R)
+        assert m.rcm_error == pytest.approx(0.006, abs=1e-12)
+        assert m.depth == pytest.approx(0.3 * L, abs=1e-12)
+    bad = measure_scope(model, np.full(7, np.nan), np.zeros(3))
+    assert np.isnan(bad.rcm_error) and np.isnan(bad.depth)
+    assert np.isnan(measure_scope(model, DEFAULT_Q0, np.array([np.nan, 0.0, 0.0])).rcm_error)
+    assert np.isnan(measure_scope(model, np.zeros(6), np.zeros(3)).depth)

@@ -70,7 +70,12 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
         help="sign of the Franka's O_F_ext_hat_K (libfranka documents robot_on_environment)",
     )
     parser.add_argument("--no-external-force", action="store_true", help="ignore the robot's force estimate")
-    parser.add_argument("--max-rcm-error", type=float, default=0.01, help="supervisor RCM bound (m)")
+    parser.add_argument(
+        "--max-rcm-error",
+        type=float,
+        default=None,
+        help="supervisor bound on the measured RCM error (m; default: the config's safety.max_rcm_error)",
+    )
     parser.add_argument("--cycle-budget-us", type=float, default=800.0, help="compute time per cycle (us)")
     parser.add_argument("--max-misses", type=int, default=20, help="consecutive deadline misses that stop")
     parser.add_argument("--ft-max-age", type=float, default=0.02, help="F/T samples older than this are off (s)")
@@ -334,10 +339,11 @@ def _build_loop(
     sup = SafetySupervisor(
         ctrl.model.limits,
         cfg.robot.dt,
-        SupervisorConfig(
-            max_rcm_error=args.max_rcm_error,
+        SupervisorConfig.from_config(
+            cfg,
             cycle_budget=args.cycle_budget_us * 1e-6,
             max_consecutive_misses=args.max_misses,
+            **({} if args.max_rcm_error is None else {"max_rcm_error": args.max_rcm_error}),
         ),
     )
     ages = SourceAges(ft=args.ft_max_age, tactile=args.tactile_max_age, instruments=args.camera_max_age)

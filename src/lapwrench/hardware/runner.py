@@ -12,10 +12,14 @@ One cycle::
 
     reading = robot.read()                # blocks until the robot's next state (1 ms)
     frame   = SensorFrame(fresh samples, reading)
-    result  = controller.tick(frame)
-    q       = supervisor.filter(result.q_ref, RCM error, measured q, compute time)
+    result  = controller.tick(frame)      # an exception here is an alarm: the arm stops to rest
+    scope   = measure_scope(model, reading.q, result.p_R)
+    q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
     robot.command(q)
     logger.cycle(...)
+
+The supervisor watches measured state only (:mod:`lapwrench.hardware.supervisor`), the same as
+the simulated loop :class:`~lapwrench.sim.loop.ClosedLoop` does.
 
 Clocks: ``frame.time`` and sample stamps are session seconds on ``time.monotonic()`` (the clock
 the drivers stamp with); the robot's own time is logged beside it. The loop works unchanged with
@@ -33,13 +37,11 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-import pinocchio as pin
 
 from lapwrench.controller import Controller, TickResult
 from lapwrench.drivers.buffer import LatestValue
 from lapwrench.hardware.log import CycleRecord, RunLogger
-from lapwrench.hardware.supervisor import SafetySupervisor
-from lapwrench.robot.description import FRAME_E
+from lapwrench.hardware.supervisor import SafetySupervisor, measure_scope
 from lapwrench.robot.interface import RobotError, RobotInterface
 from lapwrench.sensors import (
     ForceTorqueReading,
@@ -199,8 +201,6 @@ class ControlLoop:
         sources: Sensor buffers.
         ages: Maximum sample ages.
         logger: Optional MCAP logger.
-        rcm_watch: Which RCM error the supervisor watches: at the controller's ``reference``, from
-            the ``measured`` joints, or the larger of ``both``.
         command_hook: Test seam for fault injection: ``f(k, q_ref) -> q_ref`` replaces the
             controller's command of cycle ``k`` before the supervisor sees it.
         compute_hook: Test seam: called with ``k`` inside the measured compute time.
@@ -218,7 +218,6 @@ class ControlLoop:
         *,
         ages: SourceAges | None = None,
         logger: RunLogger | None = None,
-        rcm_watch: Literal["reference", "measured", "both"] = "both",
         command_hook: Callable[[int, Vec], Vec] | None = None,
         compute_hook: Callable[[int], None] | None = None,
         stop_timeout: float = 5.0,
@@ -232,33 +231,35 @@ class ControlLoop:
         self.sources = sources or Sources()
         self.ages = ages or SourceAges()
         self.logger = logger
-        self.rcm_watch = rcm_watch
         self.command_hook = command_hook
         self.compute_hook = compute_hook
         self.stop_timeout = stop_timeout
         self.switch_interval = switch_interval
-        model = controller.model
-        self._pin_model = model.model
-        self._pin_data = model.model.createData()
-        self._frame_E = model.model.getFrameId(FRAME_E)
         self._t0 = 0.0
         self._fresh: dict[str, bool] = {}
         self.last_result: TickResult | None = None
         self.last_reading: RobotReading | None = None
+        self._controller_failed = False
         self._started = False
 
     # -- helpers ------------------------------------------------------------------------------
     def session_time(self, now: float | None = None) -> float:
         return (time.monotonic() if now is None else now) - self._t0
 
-    def measured_rcm_error(self, q: Vec, p_R: Vec) -> float:
-        """Distance (m) from ``p_R`` to the scope axis at the measured joints ``q``."""
-        pin.framesForwardKinematics(self._pin_model, self._pin_data, q)
-        oE = self._pin_data.oMf[self._frame_E]
-        d = oE.rotation[:, 2]
-        r = p_R - oE.translation
-        e = r - (r @ d) * d
-        return math.sqrt(float(e @ e))
+    def _tick(self, frame: SensorFrame) -> TickResult | None:
+        """The controller's tick; an exception becomes a supervisor alarm (None), never a crash.
+
+        After a failed tick the controller is not called again in this run: the supervisor's stop
+        brings the arm to rest.
+        """
+        if self._controller_failed:
+            return None
+        try:
+            return self.controller.tick(frame)
+        except Exception as exc:
+            self._controller_failed = True
+            self.supervisor.raise_alarm(frame.time, "controller_error", f"{type(exc).__name__}: {exc}")
+            return None
 
     def _note_freshness(self, t: float, name: str, fresh: bool) -> None:
         was = self._fresh.get(name)
@@ -300,6 +301,7 @@ class ControlLoop:
         self._t0 = time.monotonic()
         self.controller.reset(reading.q, p_R)
         self.supervisor.start(reading.q, 0.0)
+        self._controller_failed = False
         self.last_reading = reading
         self._started = True
         return reading
@@ -364,20 +366,28 @@ class ControlLoop:
                 t_read = time.perf_counter()
                 now = time.monotonic()
                 frame = self._frame(now, reading)
-                result = ctrl.tick(frame)
-                for ev in result.events:
-                    sup.counted_event(frame.time, f"input_{ev.source}", ev.message)
-                q_ref = result.q_ref
+                result = self._tick(frame)
+                if result is not None:
+                    for ev in result.events:
+                        sup.counted_event(frame.time, f"input_{ev.source}", ev.message)
+                    q_ref, p_R, residual, e_ref = result.q_ref, result.p_R, result.residual, result.rcm_error
+                else:  # the supervisor is stopping on the alarm: it ignores the command
+                    q_ref, p_R, residual, e_ref = reading.q, ctrl.rcm.p_R, None, math.nan
                 if self.command_hook is not None:
                     q_ref = self.command_hook(k, q_ref)
-                e_meas = self.measured_rcm_error(reading.q, result.p_R)
-                e_ref = result.rcm_error
-                watch = {"reference": e_ref, "measured": e_meas, "both": max(e_ref, e_meas)}[self.rcm_watch]
+                scope = measure_scope(ctrl.model, reading.q, p_R)
+                e_meas = scope.rcm_error
                 if self.compute_hook is not None:
                     self.compute_hook(k)
                 compute = time.perf_counter() - t_read
                 q_cmd = sup.filter(
-                    frame.time, q_ref, rcm_error=watch, q_measured=reading.q, compute_time=compute
+                    frame.time,
+                    q_ref,
+                    rcm_error=e_meas,
+                    depth=scope.depth,
+                    residual=residual,
+                    q_measured=reading.q,
+                    compute_time=compute,
                 )
                 robot.command(q_cmd)
                 cycle = 0.0 if t_prev is None else t_read - t_prev
@@ -387,11 +397,14 @@ class ControlLoop:
                 rm.append(e_meas)
                 rr.append(e_ref)
                 cmds.append(q_cmd)
-                if self.logger is not None:
-                    self._log(k, frame, reading, result, q_cmd, e_meas, compute, cycle)
-                else:
+                if self.logger is None:
                     sup.pending.clear()
-                self.last_result = result
+                elif result is None:
+                    self._flush_events()  # no controller output to record this cycle
+                else:
+                    self._log(k, frame, reading, result, q_cmd, e_meas, compute, cycle)
+                if result is not None:
+                    self.last_result = result
                 self.last_reading = reading
                 k += 1
                 robot_t += dt

@@ -11,8 +11,21 @@ rest at the start pose), and checks them against the Franka limits. Then:
   limits, or breaks a velocity/acceleration/jerk limit is *replaced* by the next sample of a
   jerk-limited stop, an event is logged and the supervisor latches into a stop with an alarm.
   A controller that produced one bad command is not trusted for the next.
-* **RCM watch.** An RCM error above ``max_rcm_error`` → hold position (the same smooth,
-  jerk-limited stop) and raise the alarm.
+* **Measured-state watches** (issue 9), the same in the simulation and on the robot; each one
+  holds the arm (the same smooth, jerk-limited stop) with an alarm naming the quantity and its
+  value. The caller measures them (:func:`measure_scope` at the robot's measured joints):
+
+  - ``rcm_error``: the RCM error from the *measured* joints, the distance (m) from the
+    controller's RCM point p_R to the scope axis, over ``max_rcm_error`` (default 5 mm);
+  - ``insertion_depth``: the measured depth (m) of the scope tip beyond p_R, outside
+    ``[depth_min, depth_max]`` (the envelope's depth range widened by ``safety.depth_tolerance``);
+  - ``residual_force``: the residual |ΔF| (eq 19, N; the handle F/T minus the robot's external
+    force estimate: the scope's force on the incision wall) over ``max_residual_force``;
+  - ``joints_nonfinite``: measured joints that are not finite numbers.
+
+  A non-finite measured value holds too. Build the thresholds from the YAML configuration with
+  :meth:`SupervisorConfig.from_config`. A controller's *reference* state never feeds these
+  watches, nor does a simulator's ground truth.
 * **Joint limits.** A *measured* joint closer than ``joint_warn_margin`` to a limit logs an event;
   closer than ``joint_stop_margin`` → stop and alarm (the shaper keeps the reference
   ``position_margin`` inside, so this means the robot is not following).
@@ -37,11 +50,28 @@ import math
 from collections import deque
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
+from lapwrench.config import Config, EnvelopeConfig, SafetyConfig
+from lapwrench.rcm.geometry import insertion_depth, rcm_error
 from lapwrench.robot.limits import JointLimits
+from lapwrench.robot.model import RobotModel
 from lapwrench.spatial import Vec
+
+
+def _measured_bounds(safety: SafetyConfig, envelope: EnvelopeConfig) -> dict[str, float]:
+    """The supervisor's measured-state bounds from the config sections (m, m, m, N)."""
+    return {
+        "max_rcm_error": safety.max_rcm_error,
+        "depth_min": envelope.depth_min - safety.depth_tolerance,
+        "depth_max": envelope.depth_max + safety.depth_tolerance,
+        "max_residual_force": safety.max_residual_force,
+    }
+
+
+_DEFAULT_BOUNDS = _measured_bounds(SafetyConfig(), EnvelopeConfig())  # those of data/default.yaml
 
 
 class SupervisorState(StrEnum):
@@ -65,12 +95,18 @@ class SupervisorEvent:
 class SupervisorConfig:
     """Supervisor thresholds.
 
+    The measured-state bounds default to the shipped ``safety`` and ``envelope`` sections; build a
+    loop's configuration with :meth:`from_config` so every loop reads them from the YAML the same way.
+
     Attributes:
         check_fraction: Fraction of the Franka velocity/acceleration/jerk limits a command may use
             (1.0: the hard limits; the controller's shaper uses ``robot.limit_fraction`` < 1).
         stop_fraction: Fraction of the limits used by the stop trajectory.
         position_tolerance: Slack (rad) on the position-limit check of commands.
-        max_rcm_error: RCM error (m) above which the robot holds position with an alarm.
+        max_rcm_error: Measured RCM error (m) above which the robot holds with an alarm.
+        depth_min: Measured insertion depth (m) below which the robot holds with an alarm.
+        depth_max: Measured insertion depth (m) above which the robot holds with an alarm.
+        max_residual_force: Residual |ΔF| (N, eq 19) above which the robot holds with an alarm.
         joint_warn_margin: Measured distance (rad) to a joint limit that logs an event.
         joint_stop_margin: Measured distance (rad) to a joint limit that stops with an alarm.
         cycle_budget: Compute time (s) allowed per cycle; more is a deadline miss.
@@ -83,7 +119,10 @@ class SupervisorConfig:
     check_fraction: float = 1.0
     stop_fraction: float = 0.9
     position_tolerance: float = 1e-6
-    max_rcm_error: float = 0.01
+    max_rcm_error: float = _DEFAULT_BOUNDS["max_rcm_error"]
+    depth_min: float = _DEFAULT_BOUNDS["depth_min"]
+    depth_max: float = _DEFAULT_BOUNDS["depth_max"]
+    max_residual_force: float = _DEFAULT_BOUNDS["max_residual_force"]
     joint_warn_margin: float = 0.04
     joint_stop_margin: float = 0.01
     cycle_budget: float = 0.0008
@@ -92,16 +131,51 @@ class SupervisorConfig:
     max_events: int = 10_000
 
     def __post_init__(self) -> None:
-        for name in ("check_fraction", "stop_fraction", "max_rcm_error", "cycle_budget", "rest_velocity"):
+        for name in (
+            "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "cycle_budget", "rest_velocity"
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"supervisor.{name} must be positive, got {v!r}")
         if self.check_fraction > 1.0 or self.stop_fraction > 1.0:
             raise ValueError("supervisor check_fraction and stop_fraction must be <= 1")
+        if not (math.isfinite(self.depth_min) and math.isfinite(self.depth_max) and self.depth_min < self.depth_max):
+            raise ValueError(f"need finite depth_min < depth_max, got {self.depth_min!r}, {self.depth_max!r}")
         if not 0 <= self.joint_stop_margin <= self.joint_warn_margin:
             raise ValueError("need 0 <= joint_stop_margin <= joint_warn_margin")
         if self.max_consecutive_misses < 0:
             raise ValueError("max_consecutive_misses must be >= 0")
+
+    @classmethod
+    def from_config(cls, cfg: Config, **overrides: Any) -> SupervisorConfig:
+        """The measured-state bounds of ``cfg.safety`` and ``cfg.envelope``; ``overrides`` set the
+        other thresholds (or replace a bound)."""
+        return cls(**{**_measured_bounds(cfg.safety, cfg.envelope), **overrides})
+
+
+@dataclass(frozen=True)
+class MeasuredScope:
+    """The scope against the RCM point at the measured joints: ``rcm_error`` (m, distance from p_R
+    to the scope axis, eq 27) and ``depth`` (m of scope tip beyond p_R along the shaft)."""
+
+    rcm_error: float
+    depth: float
+
+
+def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope:
+    """RCM error and insertion depth at the robot's *measured* joints, for the controller's p_R.
+
+    One forward kinematics pass (:meth:`RobotModel.scope_axis_at`) and the formulas of
+    :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values
+    and arrays of the wrong shape give NaN (the supervisor then holds).
+    """
+    q = np.asarray(q_measured, dtype=float)
+    p = np.asarray(p_R, dtype=float)
+    if q.shape != (7,) or p.shape != (3,):
+        return MeasuredScope(math.nan, math.nan)
+    axis = model.scope_axis_at(q)
+    e = rcm_error(axis, p)  # type: ignore[arg-type]  # ScopeAxis has the fields rcm.geometry reads
+    return MeasuredScope(math.sqrt(float(e @ e)), insertion_depth(axis, p, model.length))  # type: ignore[arg-type]
 
 
 def _rate_limited(count: int) -> bool:
@@ -110,7 +184,7 @@ def _rate_limited(count: int) -> bool:
 
 
 class SafetySupervisor:
-    """Validates, and if needed replaces, every command; watches RCM, joints and deadlines.
+    """Validates, and if needed replaces, every command; watches measured state and deadlines.
 
     Args:
         limits: The robot's joint limits (:attr:`lapwrench.robot.model.RobotModel.limits`).
@@ -271,6 +345,64 @@ class SafetySupervisor:
             self.state = SupervisorState.HOLDING
         return self._q.copy()
 
+    # -- measured-state watches ---------------------------------------------------------------
+    def _hold(self, time: float, kind: str, message: str) -> None:
+        """Hold with an alarm on a measured quantity (the first alarm of a run is the one kept;
+        later excursions while already stopping on an alarm are not re-logged every cycle)."""
+        if not self.alarm:
+            self.raise_alarm(time, kind, f"{message}; holding")
+
+    def _watch_joints(self, time: float, q_measured: Vec) -> None:
+        c = self.cfg
+        qm = np.asarray(q_measured, dtype=float)
+        if qm.shape != (7,) or not np.all(np.isfinite(qm)):
+            self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
+            return
+        room = np.minimum(qm - self._lo, self._hi - qm)
+        j = int(np.argmin(room))
+        if room[j] < c.joint_stop_margin:
+            if self.state is SupervisorState.RUNNING:
+                self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
+        elif room[j] < c.joint_warn_margin:
+            if not self._joint_warned:
+                self.event(time, "joint_limit_near", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
+                self._joint_warned = True
+        else:
+            self._joint_warned = False
+
+    def _watch_scope(self, time: float, rcm_error: float | None, depth: float | None, residual: Vec | None) -> None:
+        c = self.cfg
+        if rcm_error is not None and not (rcm_error <= c.max_rcm_error):  # NaN fails the test too
+            self._hold(
+                time, "rcm_error", f"measured RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm"
+            )
+        if depth is not None and not (c.depth_min <= depth <= c.depth_max):
+            self._hold(
+                time,
+                "insertion_depth",
+                f"measured insertion depth {depth * 1e3:.1f} mm outside "
+                f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
+            )
+        if residual is not None:
+            f = float(np.linalg.norm(np.asarray(residual, dtype=float)))
+            if not (f <= c.max_residual_force):
+                self._hold(
+                    time, "residual_force", f"measured residual force |ΔF| {f:.1f} N > {c.max_residual_force:.1f} N"
+                )
+
+    def _watch_deadline(self, time: float, compute_time: float) -> None:
+        c = self.cfg
+        if compute_time > c.cycle_budget:
+            self.deadline_misses += 1
+            self.consecutive_misses += 1
+            self.counted_event(
+                time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
+            )
+            if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
+                self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
+        else:
+            self.consecutive_misses = 0
+
     # -- the gate -----------------------------------------------------------------------------
     def filter(
         self,
@@ -278,51 +410,32 @@ class SafetySupervisor:
         q_cmd: object,
         *,
         rcm_error: float | None = None,
+        depth: float | None = None,
+        residual: Vec | None = None,
         q_measured: Vec | None = None,
         compute_time: float | None = None,
     ) -> Vec:
         """The command to send this cycle.
 
+        Every watched value is a *measured* one (:func:`measure_scope`); ``None`` skips its watch.
+
         Args:
             time: Session time (s), for events.
-            q_cmd: The controller's joint position reference.
-            rcm_error: The RCM error (m) to watch (the larger of the controller's and the
-                measured one, as the caller sees fit); None skips the check.
-            q_measured: The robot's measured joints; None skips the joint-limit watch.
+            q_cmd: The controller's joint position reference (ignored while stopping or holding).
+            rcm_error: RCM error (m) at the measured joints, over ``max_rcm_error`` → hold.
+            depth: Insertion depth (m) at the measured joints, outside ``[depth_min, depth_max]`` → hold.
+            residual: ΔF (eq 19, N, 3-vector): handle F/T minus the robot's external force estimate;
+                |ΔF| over ``max_residual_force`` → hold. None when either sensor is unavailable.
+            q_measured: The robot's measured joints (rad): near a limit or not finite → hold.
             compute_time: This cycle's compute time (s); None skips the deadline watch.
         """
         if not self._started:
             raise RuntimeError("call SafetySupervisor.start(q0) before filter()")
-        c = self.cfg
         if compute_time is not None:
-            if compute_time > c.cycle_budget:
-                self.deadline_misses += 1
-                self.consecutive_misses += 1
-                self.counted_event(
-                    time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
-                )
-                if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
-                    self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
-            else:
-                self.consecutive_misses = 0
-        rcm_bad = rcm_error is not None and (not math.isfinite(rcm_error) or rcm_error > c.max_rcm_error)
-        if rcm_bad and self.state is SupervisorState.RUNNING:
-            self.raise_alarm(
-                time, "rcm_error", f"RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm; holding"
-            )
+            self._watch_deadline(time, compute_time)
         if q_measured is not None:
-            qm = np.asarray(q_measured, dtype=float)
-            room = np.minimum(qm - self._lo, self._hi - qm)
-            j = int(np.argmin(room))
-            if room[j] < c.joint_stop_margin:
-                if self.state is SupervisorState.RUNNING:
-                    self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
-            elif room[j] < c.joint_warn_margin:
-                if not self._joint_warned:
-                    self.event(time, "joint_limit_near", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
-                    self._joint_warned = True
-            else:
-                self._joint_warned = False
+            self._watch_joints(time, q_measured)
+        self._watch_scope(time, rcm_error, depth, residual)
 
         if self.state is SupervisorState.HOLDING:
             q = self._q.copy()

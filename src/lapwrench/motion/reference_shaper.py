@@ -1,8 +1,7 @@
-"""Shapes joint position references so they never break the Franka limits.
+"""Joint-limit intervals for the next reference, so it never breaks the Franka limits.
 
 libfranka differentiates the commanded positions: v = Δq/dt, a = Δv/dt, j = Δa/dt. Each tick the
-shaper takes the desired next velocity and clamps, per joint, the acceleration to the interval
-allowed by
+shaper gives, per joint, the interval of accelerations allowed by
 
 1. the jerk limit around the previous acceleration,
 2. the acceleration limit,
@@ -57,21 +56,40 @@ class ReferenceShaper:
         a = j * (np.sqrt(dt * dt + self.two_over_jerk * np.maximum(headroom, 0.0)) - dt)
         return np.where(headroom >= 0.0, a, headroom / dt)
 
-    def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
-        """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` that respects every limit."""
-        dt = self.dt
-        a_des = (dq_desired - state.dq) / dt
-        if not np.isfinite(a_des).all():
-            a_des = -state.dq / dt  # never propagate a NaN: brake instead
+    def acceleration_bounds(self, state: ReferenceState) -> tuple[Vec, Vec]:
+        """Per-joint interval [a_lo, a_hi] of next accelerations that respects every joint limit.
+
+        Precedence jerk > acceleration > velocity/position when the bands do not intersect, so the
+        interval is never empty. The saturation step (:mod:`lapwrench.motion.saturation`) chooses an
+        acceleration inside it that keeps the RCM task.
+        """
         # rows: [lower bound, upper bound] of the acceleration
-        headroom = self._braking_speeds(state.q + state.dq * dt) + self._toward * state.dq
+        headroom = self._braking_speeds(state.q + state.dq * self.dt) + self._toward * state.dq
         bounds = self._toward * -self._reachable_acceleration(headroom)
         a_max = self.lim.acceleration
         bounds = np.minimum(np.maximum(bounds, -a_max), a_max)
         bounds = np.minimum(np.maximum(bounds, state.ddq - self.jerk_step), state.ddq + self.jerk_step)
-        a_lo, a_hi = bounds[0], np.maximum(bounds[1], bounds[0])
-        a = np.minimum(np.maximum(a_des, a_lo), a_hi)
-        if (a != a_des).any():
+        return bounds[0], np.maximum(bounds[1], bounds[0])
+
+    def advance(self, state: ReferenceState, a: Vec, bounds: tuple[Vec, Vec] | None = None) -> ReferenceState:
+        """The next reference with acceleration ``a``, clipped into ``bounds`` (default: computed).
+
+        The clip is the last guard of the robot's limits; :attr:`clamped_ticks` counts the ticks where
+        it changed ``a`` by more than round-off (never, when the saturation step found a solution).
+        """
+        a_lo, a_hi = self.acceleration_bounds(state) if bounds is None else bounds
+        if not np.isfinite(a).all():
+            a = -state.dq / self.dt  # never propagate a NaN: brake instead
+        a_clip = np.minimum(np.maximum(a, a_lo), a_hi)
+        if np.max(np.abs(a_clip - a)) > 1e-9 * (1.0 + np.max(np.abs(a))):
             self.clamped_ticks += 1
-        dq = state.dq + a * dt
-        return ReferenceState(state.q + dq * dt, dq, a)
+        dq = state.dq + a_clip * self.dt
+        return ReferenceState(state.q + dq * self.dt, dq, a_clip)
+
+    def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
+        """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` with each joint clamped on its own.
+
+        Per-joint clamping does not keep a task; the controller uses :meth:`acceleration_bounds`
+        with the saturation step instead. This stays for tests and for motions without a task.
+        """
+        return self.advance(state, (dq_desired - state.dq) / self.dt)

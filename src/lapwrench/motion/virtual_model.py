@@ -25,24 +25,41 @@ from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec
 
 
-def self_motion_damping(kin: Kinematics, Minv: Mat, rate: float) -> Mat:
-    """Damping matrix B_s of the arm's self-motion: τ_s = -B_s θ̇, B_s = d M N_E.
+def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
+    """N_Eᵀ = I - J_Eᵀ Λ_E J_E M⁻¹, Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹: keeps the part of a torque that leaves {E} still.
+
+    N_E = I - J_E⁺ J_E is the dynamically consistent null-space projector of J_E (J_E⁺ weighted by
+    M, eq 4), so J_E M⁻¹ N_Eᵀ τ = 0 for every τ: the projected torque moves only the arm's
+    self-motion (1 DOF for the 7-DoF arm), never the scope.
+    """
+    J = kin.J_E
+    A = J @ Minv @ J.T + 1e-9 * np.eye(6)
+    return np.eye(kin.M.shape[0]) - J.T @ np.linalg.solve(A, J @ Minv)
+
+
+def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
+    """Damping matrix B_s of the arm's self-motion: τ_s = -B_s θ̇, B_s = d N_Eᵀ M = d M N_E.
 
     The RCM task and the closest-point wrenches act through J_R and J_G, whose rows lie in the
-    row space of J_E; the motion of the arm that leaves {E} still (self-motion, 1 DOF for the
-    7-DoF arm) is therefore undamped and would drift. N_E = I - J_E⁺ J_E is the dynamically
-    consistent null-space projector of J_E (J_E⁺ weighted by M, eq 4), so:
+    row space of J_E; the self-motion is therefore undamped and would drift. With ``N_E_T`` from
+    :func:`self_motion_projector`:
 
     - J_E M⁻¹ B_s = 0: the torque produces no acceleration of {E}, the scope is not disturbed;
     - θ̇ᵀ B_s θ̇ = d ‖N_E θ̇‖²_M >= 0: it only dissipates, at rate d (1/s).
-
-    Computed as d (M - J_Eᵀ Λ_E J_E) with Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹, which equals d M N_E.
     """
     if rate == 0.0:
         return np.zeros_like(kin.M)
-    J = kin.J_E
-    A = J @ Minv @ J.T + 1e-9 * np.eye(6)
-    return rate * (kin.M - J.T @ np.linalg.solve(A, J))
+    return rate * N_E_T @ kin.M
+
+
+def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: float) -> Vec:
+    """-k ∇H(q), H = ½ Σ_i (distance of q_i into the ``zone`` next to either limit)²: a push away
+    from each joint limit that is zero outside the zone and grows linearly inside it (N m).
+
+    The controller applies it through :func:`self_motion_projector`, so the redundant self-motion
+    keeps the joints away from their limits without moving the scope.
+    """
+    return stiffness * (np.maximum(lower + zone - q, 0.0) - np.maximum(q - (upper - zone), 0.0))
 
 
 def euler_velocity_step(

@@ -8,6 +8,7 @@ Jacobian), so nothing downstream calls Pinocchio again.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -60,6 +61,15 @@ def scope_axis(R_E: Mat) -> tuple[Vec, Mat]:
     return d, np.eye(3) - np.outer(d, d)
 
 
+class ScopeAxis(NamedTuple):
+    """The scope axis at one configuration, in {B}: the fields of :class:`Kinematics` that
+    :mod:`lapwrench.rcm.geometry`'s ``rcm_error`` and ``insertion_depth`` read (p_E in m)."""
+
+    p_E: Vec
+    d_z: Vec
+    P: Mat
+
+
 class RobotModel:
     """The 7-DoF arm (fingers removed) with a laparoscope on the flange, in Pinocchio."""
 
@@ -78,6 +88,7 @@ class RobotModel:
         self.limits: JointLimits = franka_limits(kind, self.model)
         self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         self._lower = np.tril_indices(self.nv, -1)
+        self._axis_data = self.model.createData()  # scope_axis_at's own workspace
 
     @property
     def length(self) -> float:
@@ -123,3 +134,13 @@ class RobotModel:
         """Pose of a named frame at q (convenience, not for the control tick)."""
         pin.framesForwardKinematics(self.model, self.data, q)
         return self.data.oMf[self.model.getFrameId(frame)].copy()
+
+    def scope_axis_at(self, q: Vec) -> ScopeAxis:
+        """The scope axis (eqs 16-17) at joints ``q``, e.g. the *measured* ones: one forward
+        kinematics pass and the {E} placement (a few µs), on a workspace of its own so it never
+        disturbs the tick's :meth:`kinematics`. Non-finite ``q`` gives non-finite values."""
+        model, data = self.model, self._axis_data
+        pin.forwardKinematics(model, data, np.asarray(q, dtype=float))
+        oE = pin.updateFramePlacement(model, data, self.frame_E)
+        d_z, P = scope_axis(oE.rotation)
+        return ScopeAxis(oE.translation.copy(), d_z, P)

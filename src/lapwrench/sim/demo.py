@@ -175,6 +175,8 @@ def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) ->
         return report.plot_grip(res, out)
     if name == "rcm-disturbance":
         return report.plot_disturbance(res, out)
+    if name == "hard-push":
+        return report.plot_hard_push(res, out)
     stem = name.replace("-", "_")
     figs = report.plot_tracking_run(res, out, stem)
     if res.frames:

@@ -15,7 +15,7 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, measure_scope
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.model import RobotModel
@@ -147,10 +147,9 @@ class ClosedLoop:
         self.robot = SimRobot(
             self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=s_obs)
         )
+        # the same measured-state bounds as on the robot; no deadline watch (simulated time)
         self.supervisor = SafetySupervisor(
-            self.model.limits,
-            CONTROL_DT,
-            SupervisorConfig(max_rcm_error=cfg.inputs.max_rcm_error, cycle_budget=1e9, max_consecutive_misses=0),
+            self.model.limits, CONTROL_DT, SupervisorConfig.from_config(cfg, max_consecutive_misses=0)
         )
         self.camera = SimCamera(self.world) if (camera or detector is not None or on_frame) else None
         self.detection: SimulatedAsyncDetector | None = None
@@ -197,7 +196,18 @@ class ClosedLoop:
         return None if self.detection is None else self.detection.observation(t)
 
     def step(self, grip_force: float, before_physics: Callable[[float], None] | None = None) -> TickResult:
-        """One 1 ms tick: sensors → controller → robot. The hand wrench must already be set."""
+        """One 1 ms tick: sensors → controller → supervisor → robot. The hand wrench must already be set.
+
+        The supervisor watches *measured* state only: the RCM error and the insertion depth at the
+        joints the robot reads (:func:`~lapwrench.hardware.supervisor.measure_scope`, for the
+        controller's p_R) and the residual ΔF of the controller's sensors; the simulator's ground
+        truth (:meth:`physical_rcm_error`, the contact force) is for metrics only. An exception
+        from the controller's tick is an alarm too.
+
+        Raises:
+            SafetyStopError: the supervisor raised an alarm; the arm was first brought to rest
+                with the supervisor's jerk-limited stop (this tick's command is its first sample).
+        """
         t = self.t
         self._camera_step(t)
         reading = self.robot.read() if t > 0.0 else self._reading
@@ -208,27 +218,41 @@ class ClosedLoop:
             instruments=self._observation(t),
             robot=RobotReading(reading.q, reading.dq, reading.external_force, t),
         )
-        result = self.controller.tick(frame)
-        self.last_mode = result.mode
-        q_cmd = self.supervisor.filter(t, result.q_ref, rcm_error=result.rcm_error, q_measured=reading.q)
-        self.events.extend(self.supervisor.drain_events())
-        if self.supervisor.alarm:
-            self._stop_to_rest()
-            raise SafetyStopError(t, self.supervisor.alarm_reason)
+        sup = self.supervisor
+        result: TickResult | None = None
+        try:
+            result = self.controller.tick(frame)
+        except Exception as exc:  # never a crash: hold through the supervisor
+            sup.raise_alarm(t, "controller_error", f"{type(exc).__name__}: {exc}")
+        if result is not None:
+            self.last_mode = result.mode
+            q_ref, p_R, residual = result.q_ref, result.p_R, result.residual
+        else:
+            q_ref, p_R, residual = reading.q, self.controller.rcm.p_R, None  # type: ignore[union-attr]
+        measured = measure_scope(self.model, reading.q, p_R)
+        q_cmd = sup.filter(
+            t, q_ref, rcm_error=measured.rcm_error, depth=measured.depth, residual=residual, q_measured=reading.q
+        )
+        self.events.extend(sup.drain_events())
         if before_physics is not None:
             before_physics(t)
         self.robot.command(q_cmd)
         self.t = t + CONTROL_DT
+        if sup.alarm:
+            self._stop_to_rest()
+            raise SafetyStopError(t, sup.alarm_reason)
+        assert result is not None  # a failed tick raised the alarm above
         return result
 
     def _stop_to_rest(self) -> None:
         """After an alarm: keep sending the supervisor's jerk-limited stop until the arm is at rest."""
         for _ in range(10_000):
             if self.supervisor.at_rest:
-                return
+                break
             reading = self.robot.read()
             self.robot.command(self.supervisor.filter(self.t, reading.q, q_measured=reading.q))
             self.t += CONTROL_DT
+        self.events.extend(self.supervisor.drain_events())
 
     def physical_rcm_error(self) -> float:
         """Distance (m) from the unloaded incision point (where the wall would sit with no shaft

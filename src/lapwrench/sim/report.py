@@ -121,6 +121,32 @@ def plot_tracking_run(res: ScenarioResult, out: Path, stem: str) -> list[str]:
     return [_save(fig, out / f"{stem}.png")]
 
 
+def plot_hard_push(res: ScenarioResult, out: Path) -> list[str]:
+    """Physical RCM error, trocar force and tip-depth change (mm) vs time, every hard-push run."""
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.2))
+    kinds = sorted({str(r.metrics["kind"]) for r in res.runs})
+    colors = {k: f"C{i}" for i, k in enumerate(kinds)}
+    for run in res.runs:
+        if "t" not in run.trace:
+            continue
+        tr, c = run.trace, colors[str(run.metrics["kind"])]
+        ax[0].plot(tr["t"], tr["rcm_error_phys"] * 1e3, c=c, lw=0.8)
+        ax[1].plot(tr["t"], np.linalg.norm(tr["contact_force"], axis=1), c=c, lw=0.8)
+        ax[2].plot(tr["t"], (tr["tip_depth"] - tr["tip_depth"][0]) * 1e3, c=c, lw=0.8)
+    tg: dict[str, float] = res.metrics["targets"]  # type: ignore[assignment]
+    ax[0].axhline(tg["rcm_error_max_mm"], ls=":", c="r", lw=1)
+    ax[1].axhline(tg["trocar_force_max_N"], ls=":", c="r", lw=1)
+    d0 = float(res.runs[0].metrics["tip_depth_start_mm"]) if res.runs else 0.0  # type: ignore[arg-type]
+    for k in ("tip_depth_min_mm", "tip_depth_max_mm"):
+        ax[2].axhline(tg[k] - d0, ls=":", c="r", lw=1)
+    ax[0].set(xlabel="time (s)", ylabel="physical RCM error (mm)", title="RCM error (target dotted)")
+    ax[1].set(xlabel="time (s)", ylabel="trocar force |F| (N)", title="trocar force (target dotted)")
+    ax[2].set(xlabel="time (s)", ylabel="tip depth change (mm, + = deeper)", title="depth (envelope range dotted)")
+    handles = [plt.Line2D([], [], c=colors[k]) for k in kinds]
+    ax[2].legend(handles, kinds, fontsize=8)
+    return [_save(fig, out / "hard_push.png")]
+
+
 def annotate_frame(frame: np.ndarray, cfg: Config, label: str) -> np.ndarray:
     import cv2
 
@@ -236,6 +262,8 @@ def write_report(out: Path, results: dict[str, ScenarioResult], meta: dict, figu
             "",
         ]
         L += [f"![{name}]({f})" for f in figures.get(name, [])] + [""]
+    if "hard-push" in results:
+        L += _hard_push_section(results["hard-push"], figures.get("hard-push", []))
     if meta.get("printed_damping_check"):
         c = meta["printed_damping_check"]
         L += ["## The printed damping (k_t = 150 N m s, k_f = 2 N s/m) in the tracking scenarios", "", c, ""]
@@ -243,6 +271,51 @@ def write_report(out: Path, results: dict[str, ScenarioResult], meta: dict, figu
     path = out / "report.md"
     path.write_text("\n".join(L))
     return path
+
+
+def _hard_push_section(res: ScenarioResult, figures: list[str]) -> list[str]:
+    """The hard-push table (issue 9, point 7): one row per run, each marked against the targets."""
+    m = res.metrics
+    tg: dict[str, float] = m["targets"]  # type: ignore[assignment]
+    L = [
+        "## Hard pushes (issue 9)",
+        "",
+        f"Each run starts from the same pose; the hand pushes for {_fmt(m['push_s'])} s (rising and falling "
+        f"over 50 ms), lets go, and the run settles for {_fmt(m['settle_s'])} s. Targets: physical RCM error ≤ "
+        f"{tg['rcm_error_max_mm']:g} mm, trocar force ≤ {tg['trocar_force_max_N']:g} N, scope tip depth beyond "
+        f"the incision inside [{tg['tip_depth_min_mm']:g}, {tg['tip_depth_max_mm']:g}] mm (envelope depth range; "
+        "start depth below), every joint reference inside the Franka limits. A safety hold ends a run (its state "
+        "at rest counts); a simulation stop (e.g. the scope left the trocar) fails it.",
+        "",
+        "| run | δ̄ | RCM max mm | trocar F max N | tilt max ° | depth change mm: min / max (tip depth) | envelope hits "
+        "(ticks: walls) | alarm | refs in limits | result |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for run in res.runs:
+        r = run.metrics
+        hits = f"{r['envelope_hit_ticks']}" + (f": {r['envelope_walls']}" if r["envelope_walls"] else "")
+        verdict = "pass" if r["passed"] else f"**FAIL** ({r['failed_targets']})"
+        L.append(
+            f"| {run.label} | {_fmt(r['delta_mean'])} | {_fmt(r['rcm_error_max_mm'])} | "
+            f"{_fmt(r['trocar_force_max_N'], nd=1)} | {_fmt(r['tilt_max_deg'], nd=1)} | "
+            f"{_fmt(r['depth_change_min_mm'], nd=1)} / {_fmt(r['depth_change_max_mm'], nd=1)} "
+            f"({_fmt(r['tip_depth_min_mm'], nd=1)}–{_fmt(r['tip_depth_max_mm'], nd=1)}) | {hits} | "
+            f"{_fmt(r['alarm'])} | {_fmt(r['references_inside_limits'])} | {verdict} |"
+        )
+    start = res.runs[0].metrics["tip_depth_start_mm"] if res.runs else None
+    L += [
+        "",
+        f"**{m['passed']} of {m['runs']} runs meet every target**; {m['alarms']} ended early (alarm or stop). "
+        f"Tip depth at the start {_fmt(start, ' mm', 1)}; depth change + = deeper into the body. "
+        f"Every reference inside the Franka limits: **{m['all_references_inside_limits']}**.",
+        "",
+    ]
+    if m["still_moving"]:
+        L += [
+            "Still moving along the shaft (> 1 mm/s) at the end of the run: " + ", ".join(m["still_moving"]) + ".",  # type: ignore[arg-type]
+            "",
+        ]
+    return L + [f"![hard push]({f})" for f in figures] + [""]
 
 
 def _compress_modes(timeline: list[tuple[float, str]], min_dwell: float = 0.3) -> list[str]:

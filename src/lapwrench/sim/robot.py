@@ -8,12 +8,19 @@ A Franka does not measure the force on its end effector: it estimates it from th
 sensors. :class:`SimRobot` does the same, never reading the simulator's ground truth:
 
 1. ``tau_J`` is the simulated link-side joint torque (what the Franka's sensors measure) plus a
-   configurable constant bias and Gaussian noise;
+   configurable constant bias and Gaussian noise. By default it is the torque's mean over the 1 ms
+   tick (:meth:`~lapwrench.sim.world.SimWorld.joint_torque_tick_mean`), as a sensor sampled at
+   1 kHz behind an anti-aliasing filter delivers it, not a sample of the servo's per-tick torque
+   sawtooth at the end of the tick (``sampling="tick_end"``, the former model: its lateral error
+   grows to tens of newtons above 1 rad/s of pivot speed, see ``bench/force_estimate.py``);
 2. a generalized-momentum observer (:class:`~lapwrench.sim.sensors.ExternalForceObserver`) with
    the controller's Pinocchio model (which includes the laparoscope, i.e. a correctly identified
    load) turns it into ``tau_ext`` and, through ``J_E(q)^T``, into the wrench on the end effector;
 3. ``external_force`` is its force part: the total external force *on* the end effector in {B}
    (hand + trocar), the convention of :class:`~lapwrench.sensors.RobotReading`.
+
+Like the Franka's ``O_F_ext_hat_K`` (computed at 1 kHz from filtered joint torques) the estimate is
+low-pass: the observer's first-order dynamics of bandwidth ``observer_gain`` (60 1/s, ~10 Hz).
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -43,6 +51,8 @@ class ForceEstimateConfig:
         observer_gain: Bandwidth (1/s) of the momentum observer (the Franka's estimate is filtered too).
         damping: Damping of the least-squares wrench solve (near singularities).
         seed: Noise generator seed.
+        sampling: ``"tick_mean"``: the joint torque averaged over each 1 ms tick (default);
+            ``"tick_end"``: sampled at the end of the tick (the former model, kept for comparison).
     """
 
     torque_noise: float = 0.0
@@ -50,6 +60,11 @@ class ForceEstimateConfig:
     observer_gain: float = 60.0
     damping: float = 1e-3
     seed: int = 0
+    sampling: Literal["tick_mean", "tick_end"] = "tick_mean"
+
+    def __post_init__(self) -> None:
+        if self.sampling not in ("tick_mean", "tick_end"):
+            raise ValueError(f"sampling must be 'tick_mean' or 'tick_end', got {self.sampling!r}")
 
 
 class SimRobot:
@@ -104,7 +119,8 @@ class SimRobot:
     def _measure(self) -> RobotReading:
         w = self.world
         q, dq = w.q, w.dq
-        tau_J = w.joint_torque_measured() + self._bias
+        tau = w.joint_torque_tick_mean() if self.est.sampling == "tick_mean" else w.joint_torque_measured()
+        tau_J = tau + self._bias
         if self.est.torque_noise > 0:
             tau_J = tau_J + self._rng.normal(0.0, self.est.torque_noise, 7)
         self.tau_J = tau_J

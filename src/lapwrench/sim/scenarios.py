@@ -5,6 +5,8 @@
   without RCM adaptation.
 - ``needle-search`` (Fig. 6-7): tracking only → handle & tracking → handle dominant → tracking.
 - ``workflow`` (Fig. 9): handle manipulation and autonomous tracking alternate.
+- ``hard-push`` (issue 9): hostile pushes, a speed-driven hand and a roll torque on the handle
+  (:mod:`lapwrench.sim.hard_push`).
 
 Each returns a :class:`ScenarioResult` with its traces and metrics; durations scale with
 ``time_scale`` for quick tests (the physics and the controller are unchanged).
@@ -354,13 +356,25 @@ def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Scenario
     return _scripted_run("workflow", cfg, opts, 40.0 * s, script)
 
 
+# --------------------------------------------------------------------------- hard push (issue 9)
+
+
+def hard_push(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+    """Lateral and axial pushes, a speed-driven hand and a roll torque (see :mod:`lapwrench.sim.hard_push`)."""
+    from lapwrench.sim.hard_push import hard_push as run
+
+    return run(cfg, opts)
+
+
 SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
     "grip": grip,
     "rcm-disturbance": rcm_disturbance,
     "needle-search": needle_search,
     "workflow": workflow,
+    "hard-push": hard_push,
 }
-SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0}
+# hard-push: 28 runs of 1.5 s push + 1 s settling (lapwrench.sim.hard_push.total_sim_seconds())
+SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0, "hard-push": 70.0}
 
 
 def axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:

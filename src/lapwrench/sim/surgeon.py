@@ -137,3 +137,61 @@ class HousingDisturbance:
     def apply(self, world: SimWorld, t: float) -> None:
         load = world.housing_load_for_shift(np.array(self.shift)) if t >= self.start else np.zeros(3)
         world.set_housing_load(load)
+
+
+@dataclass
+class SpeedDrivenHand:
+    """A hand that tries to pivot the scope at ``speed`` (rad/s) toward ``direction``.
+
+    The push on the handle aims at ``gain`` (N per rad/s) times the shortfall of the shaft's
+    angular speed below ``speed``, capped at ``max_force`` (N); the hand perceives the speed with a
+    ``lag`` (s) first-order delay and changes its push at most at ``force_rate`` (N/s), also when it
+    lets go. It grips with ``grip_force`` (N) until its push is back to zero, and lets go once the
+    shaft has turned ``sweep_deg`` from its axis at the first call (or when ``engaged`` is cleared).
+    """
+
+    direction: np.ndarray  # where the tip should go (base frame; its part ⟂ the shaft is used)
+    speed: float  # rad/s
+    grip_force: float  # N
+    gain: float = 60.0  # N per rad/s of speed shortfall
+    max_force: float = 30.0  # N
+    force_rate: float = 600.0  # N/s: 30 N in 50 ms
+    sweep_deg: float = 30.0  # deg of turn after which the hand lets go
+    lag: float = 0.05  # s
+    engaged: bool = True
+    _d0: np.ndarray | None = field(default=None, repr=False)
+    _prev: np.ndarray | None = field(default=None, repr=False)
+    _speed: float = field(default=0.0, repr=False)
+    _force: float = field(default=0.0, repr=False)
+
+    def __post_init__(self) -> None:
+        self.direction = np.asarray(self.direction, float) / np.linalg.norm(self.direction)
+        if self.speed <= 0 or self.max_force <= 0 or self.force_rate <= 0 or self.grip_force < 0:
+            raise ValueError("speed, max_force and force_rate must be > 0, grip_force >= 0")
+
+    @property
+    def perceived_speed(self) -> float:
+        """The shaft's angular speed (rad/s) as the hand perceives it."""
+        return self._speed
+
+    def apply(self, world: SimWorld, t: float, dt: float) -> float:
+        """Set the hand wrench on the world; returns the grip force (0 once released)."""
+        _, d = world.shaft_axis()
+        if self._d0 is None:
+            self._d0 = d
+        if self._prev is not None:
+            rate = float(np.linalg.norm(d - self._prev)) / dt
+            self._speed += (rate - self._speed) * min(1.0, dt / self.lag)
+        self._prev = d
+        if self.engaged and axis_angle(d, self._d0) >= math.radians(self.sweep_deg):
+            self.engaged = False
+        wanted = float(np.clip(self.gain * (self.speed - self._speed), 0.0, self.max_force)) if self.engaged else 0.0
+        step = self.force_rate * dt
+        self._force += float(np.clip(wanted - self._force, -step, step))
+        if not self.engaged and self._force <= 0.0:
+            world.set_hand_wrench(np.zeros(6))
+            return 0.0
+        toward = self.direction - (self.direction @ d) * d
+        toward /= max(np.linalg.norm(toward), 1e-12)
+        world.set_hand_wrench(np.concatenate([-self._force * toward, np.zeros(3)]))  # handle behind the pivot
+        return self.grip_force

@@ -13,6 +13,14 @@ it is the finite difference of successive references, as the robot does with its
 
 After the substeps the forward dynamics is evaluated once more (``mj_forward``), so every reading
 (poses, contact force, torques, accelerations) is consistent with the state at :attr:`SimWorld.time`.
+
+Within a tick the servo torque is a sawtooth: the reference steps at the tick, then the PD term
+decays as the joint catches up (by about Kp q̇ dt per tick, several N m at 1 rad/s). A sample at the
+end of the tick is therefore biased against the torque that actually moved the arm during it.
+:meth:`SimWorld.joint_torque_tick_mean` is the tick mean of the link-side torque, with each
+substep's velocity-dependent terms (servo damping, joint damping) at the velocity the implicit
+integrator used: what a torque sensor averaged over the 1 ms sample delivers, and consistent with
+the momentum change over the tick.
 """
 
 from __future__ import annotations
@@ -112,7 +120,12 @@ class SimWorld:
         m.actuator_biasprm[self._act, 1] = -self._kp
         m.actuator_biasprm[self._act, 2] = -self._kv
         self._armature = m.dof_armature[self._vadr].copy()
+        self._dof_damping = m.dof_damping[self._vadr].copy()
         self._tau_max = TAU_MAX.copy()
+        self._tau_free = self._tau_max - 1e-9  # |servo torque| below this: not clipped
+        v0 = int(self._vadr[0])
+        contiguous = np.array_equal(self._vadr, np.arange(v0, v0 + 7))
+        self._vsl: slice | np.ndarray = slice(v0, v0 + 7) if contiguous else self._vadr  # views when possible
 
         self._body_E = m.body(FRAME_E).id
         self._body_H = m.body(FRAME_H).id
@@ -178,6 +191,7 @@ class SimWorld:
         d.qpos[self._ball_qadr : self._ball_qadr + 4] = quat
         d.qpos[self._sleeve_qadr] = self._depth0 - s
         mujoco.mj_forward(m, d)
+        self._tau_J_mean = self.joint_torque_measured()
         self._warn_counts = [self.data.warning[i].number for i in self._warn_idx]
 
     def close(self) -> None:
@@ -225,9 +239,32 @@ class SimWorld:
         d = self.data
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise SimulationUnstableError(self.time, "state (qpos/qvel)", "non-finite")
-        mujoco.mj_step(self.model, d, nstep=self.n_substeps)
+        self._substeps()
         mujoco.mj_forward(self.model, d)
         self._check()
+
+    def _substeps(self) -> None:
+        """Run the tick's physics substeps, keeping the tick mean of the link-side joint torque."""
+        m, d, v = self.model, self.data, self._vsl
+        total = np.zeros(7)
+        v_tick = d.qvel[v].copy()
+        for _ in range(self.n_substeps):
+            v_start = d.qvel[v].copy()
+            mujoco.mj_step(m, d)  # d.qfrc_* now hold this substep's forces, d.qvel its end velocity
+            total += self._substep_joint_torque(d.qvel[v] - v_start)
+        tick = self.n_substeps * m.opt.timestep
+        self._tau_J_mean = total / self.n_substeps - self._armature * (d.qvel[v] - v_tick) / tick
+
+    def _substep_joint_torque(self, dv: np.ndarray) -> np.ndarray:
+        """Servo plus joint damping torque as ``implicitfast`` applied them over the substep just taken.
+
+        Their velocity terms act at the end-of-substep velocity: -(kv + b) dv on top of the values at
+        its start, except on a servo clipped at tau_max (then its torque does not depend on velocity).
+        """
+        d, v = self.data, self._vsl
+        tau = d.qfrc_actuator[v]
+        kv = self._kv * (np.abs(tau) < self._tau_free)
+        return tau + d.qfrc_damper[v] - (kv + self._dof_damping) * dv
 
     def _check(self) -> None:
         d = self.data
@@ -279,6 +316,16 @@ class SimWorld:
         v = self._vadr
         d = self.data
         return d.qfrc_actuator[v] + d.qfrc_damper[v] - self._armature * d.qacc[v]
+
+    def joint_torque_tick_mean(self) -> np.ndarray:
+        """tau_J averaged over the last 1 ms tick (N m): the torque that moved the arm during it.
+
+        The mean over the substeps of the servo and joint damping torques as the integrator applied
+        them (see :meth:`_substep_joint_torque`), minus the armature's share, armature x (change of
+        velocity over the tick) / tick. After :meth:`reset` it is the instantaneous
+        :meth:`joint_torque_measured`.
+        """
+        return self._tau_J_mean.copy()
 
     def external_torque(self) -> np.ndarray:
         """tau_ext: ground-truth joint torque from external loads (N m).

@@ -9,8 +9,10 @@ null-space source.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
+
+import numpy as np
 
 from lapwrench.robot.model import Kinematics
 from lapwrench.sensors import ValidInputs
@@ -30,6 +32,7 @@ class TaskGeometry:
     p_G: Vec
     o_G: Vec
     J_G: Mat
+    e_R_offset: Vec = field(default_factory=lambda: np.zeros(3))  # measured minus reference e_R (m), filtered
 
 
 @dataclass(frozen=True)

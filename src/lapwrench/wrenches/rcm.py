@@ -24,4 +24,5 @@ class RcmWrench:
 
     def compute(self, ctx: TickContext) -> Wrench:
         g = ctx.geometry
-        return Wrench(np.zeros(3), rcm_force(g.e_R, g.e_R_rate, self.cfg.Kp, self.cfg.Kd), g.p_R)
+        # e_R at the reference plus what the measured pose adds (motion/measured_feedback.py)
+        return Wrench(np.zeros(3), rcm_force(g.e_R + g.e_R_offset, g.e_R_rate, self.cfg.Kp, self.cfg.Kd), g.p_R)

@@ -1,0 +1,82 @@
+"""ClosedLoop's supervisor: it watches measured state, and a failing controller tick becomes a hold."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lapwrench.config import load
+from lapwrench.rcm.geometry import rcm_error
+from lapwrench.robot.limits import limit_usage
+from lapwrench.sim.loop import ClosedLoop, SafetyStopError
+from lapwrench.sim.world import CONTROL_DT
+
+
+def recording(loop: ClosedLoop) -> list[np.ndarray]:
+    """Every command the robot receives, in order."""
+    sent: list[np.ndarray] = []
+    command = loop.robot.command
+
+    def record(q: np.ndarray) -> None:
+        sent.append(np.array(q, dtype=float))
+        command(q)
+
+    loop.robot.command = record  # type: ignore[method-assign]
+    return sent
+
+
+def assert_at_rest_inside_limits(loop: ClosedLoop, sent: list[np.ndarray]) -> None:
+    assert loop.supervisor.at_rest
+    cmds = np.array(sent)
+    assert np.all(np.isfinite(cmds))
+    assert np.allclose(cmds[-1], cmds[-2])  # the stop ended at rest
+    usage = limit_usage(cmds, CONTROL_DT, loop.model.limits, loop.q0)
+    assert usage["position_excess"] == 0 and max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1, usage
+
+
+def test_supervisor_holds_on_measured_rcm_error_while_the_reference_error_is_small() -> None:
+    """The robot is displaced in the world (it no longer sits where the controller's reference
+    is): the measured RCM error trips the 5 mm hold although the reference error stays ~0."""
+    loop = ClosedLoop(load())
+    sent = recording(loop)
+    for _ in range(50):
+        loop.step(0.0)
+    q_shift = loop.world.q + np.r_[0.012, 0, 0, 0, 0, 0, 0]  # about 7 mm at the RCM point
+    loop.world.reset(q_shift)
+    with pytest.raises(SafetyStopError) as err:
+        loop.step(0.0)
+    assert str(err.value.reason).startswith("rcm_error: measured RCM error"), err.value.reason
+    ctrl = loop.controller
+    kin = ctrl.model.kinematics(ctrl.ref.q, ctrl.ref.dq)
+    assert np.linalg.norm(rcm_error(kin, ctrl.rcm.p_R)) < 1e-3  # the controller's own error is small
+    assert any(getattr(e, "kind", None) == "rcm_error" for e in loop.events)
+    assert_at_rest_inside_limits(loop, sent)
+
+
+def test_supervisor_holds_on_measured_insertion_depth() -> None:
+    """p_R moved along the shaft (the reference RCM error stays 0): the measured depth is out of range."""
+    loop = ClosedLoop(load())
+    loop.step(0.0)
+    _p, d_z = loop.world.shaft_axis()
+    loop.controller.rcm.p_R = loop.controller.rcm.p_R + 0.05 * d_z  # depth 58 mm -> 8 mm
+    with pytest.raises(SafetyStopError) as err:
+        loop.step(0.0)
+    assert str(err.value.reason).startswith("insertion_depth: measured insertion depth 8."), err.value.reason
+
+
+def test_exception_in_the_controller_tick_stops_at_rest_with_an_alarm(monkeypatch: pytest.MonkeyPatch) -> None:
+    loop = ClosedLoop(load())
+    sent = recording(loop)
+    loop.world.set_hand_wrench(np.array([0.0, 8.0, 0.0, 0.0, 0.0, 0.0]))  # hand-guided: the arm moves
+    for _ in range(400):
+        loop.step(30.0)
+    assert np.max(np.abs(loop.supervisor.command_state[1])) > 1e-3
+
+    def broken(frame: object) -> None:
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(loop.controller, "tick", broken)
+    with pytest.raises(SafetyStopError) as err:
+        loop.step(30.0)
+    assert err.value.reason == "controller_error: LinAlgError: Singular matrix"
+    assert_at_rest_inside_limits(loop, sent)
