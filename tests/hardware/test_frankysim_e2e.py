@@ -144,4 +144,8 @@ def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:
         assert usage[k] <= 1.0, usage
     # and the reported desired positions are the commands we sent (nothing altered on the way)
     assert robot.inner.state is not None
-    assert np.allclose(robot.inner.state.q_d, stats.commands[-1], atol=1e-9)
+    # Measured 2026-12-01 with the franky-sim installed today: q_d differs from the last command by up
+    # to 1.3e-6 rad, on the code before issue 9 too (it passed at 1e-9 before); 1e-5 rad still catches
+    # any command altered on the way (the smallest joint step at 0.1 rad/s is 1e-4 rad).
+    q_d = np.asarray(robot.inner.state.q_d)
+    assert np.allclose(q_d, stats.commands[-1], atol=1e-5), q_d - stats.commands[-1]
