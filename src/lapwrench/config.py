@@ -169,6 +169,7 @@ class SafetyConfig:
     max_rcm_error: float = _positive(default=0.005)  # m, p_R to the scope axis at the measured joints
     depth_tolerance: float = _nonnegative(default=0.005)  # m beyond the envelope's depth range
     max_residual_force: float = _positive(default=20.0)  # N, |ΔF| (eq 19): the scope's force on the wall
+    residual_force_time: float = _nonnegative(default=0.05)  # s |ΔF| must stay over its bound (estimate lag)
 
 
 @dataclass(frozen=True)

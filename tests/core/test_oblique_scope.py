@@ -35,7 +35,7 @@ def test_oblique_camera_looks_30_degrees_off_the_shaft() -> None:
 
 
 def test_oblique_scope_tracks_in_its_own_camera_frame() -> None:
-    cfg = load("swapped-damping").replace(scope={"oblique_angle_deg": 30.0})
+    cfg = load().replace(scope={"oblique_angle_deg": 30.0})
     ctrl = Controller(cfg)
     kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
     depth = 0.07

@@ -194,11 +194,31 @@ def test_measured_state_holds_with_an_alarm_naming_it(limits, case: str) -> None
     measured, reason = HOLDS[case]
     s, q, cmds = moving(limits)
     kw = {"rcm_error": 0.001, "depth": 0.058, "residual": np.zeros(3), **measured}
-    cmds.append(s.filter(0.3, q, **kw))
+    # a finite residual force must persist for residual_force_time (50 ms) before it holds
+    ticks = 51 if case == "residual" else 1
+    if ticks > 1:
+        v = s.command_state[1]
+        for k in range(1, ticks):  # the reference keeps its speed meanwhile
+            cmds.append(s.filter(0.3 + (k - 1) * DT, q + k * DT * v, **kw))
+            assert not s.alarm
+        q = q + ticks * DT * v
+    cmds.append(s.filter(0.3 + (ticks - 1) * DT, q, **kw))
     assert s.alarm and s.alarm_reason.startswith(reason), s.alarm_reason
     assert s.state is SupervisorState.STOPPING  # a jerk-limited stop, not a jump to a halt
     assert s.replaced_commands == 0
     assert_stopped_at_rest_inside_limits(s, q, cmds, limits)
+
+
+def test_a_residual_force_transient_shorter_than_its_time_does_not_hold(limits) -> None:
+    """A hand letting go of 30 N at once: |ΔF| ~26 N for ~25 ms while the force estimate catches up."""
+    s = started(limits)
+    for k in range(40):
+        f = 26.0 if k < 25 else 2.0
+        s.filter(k * DT, DEFAULT_Q0, rcm_error=0.001, depth=0.058, residual=np.array([f, 0.0, 0.0]))
+    assert not s.alarm
+    for k in range(40, 120):  # then a load that stays: held after 50 ms
+        s.filter(k * DT, DEFAULT_Q0, rcm_error=0.001, depth=0.058, residual=np.array([26.0, 0.0, 0.0]))
+    assert s.alarm and "residual_force" in s.alarm_reason and "for 50 ms" in s.alarm_reason
 
 
 @pytest.mark.parametrize(

@@ -169,13 +169,19 @@ class _Watch:
 
     d0: np.ndarray
     length: float  # scope length (m)
-    depth0: float  # tip depth (m) beyond the incision at the start
+    depth0: float  # tip depth (m) beyond the unloaded incision at the start
     walls: Counter
     hit_ticks: int = 0
 
     def tip_depth(self, world: SimWorld) -> float:
-        """Depth (m) of the scope tip beyond the incision along the shaft."""
-        return self.length - world.insertion_depth()
+        """Depth (m) of the scope tip beyond the *unloaded* incision point along the shaft.
+
+        Measured from where the incision sits with no shaft load (it moves with the phantom, not
+        with the wall's elastic give), like the physical RCM error: so it is the tip's depth in the
+        body, the distance that matters for the tissue below.
+        """
+        p_E, d_z = world.shaft_axis()
+        return self.length - float((world.incision_rest_position() - p_E) @ d_z)
 
     def tilt_deg(self, world: SimWorld) -> float:
         """Angle (deg) of the shaft from its start axis."""
