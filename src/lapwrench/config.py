@@ -138,7 +138,7 @@ class MotionConfig:
     self_motion_damping: float = _nonnegative(default=10.0)
     rcm_task: Literal["lateral", "printed"] = "lateral"
     joint_limit_zone: float = _nonnegative(default=0.3)  # rad inside each joint limit where self-motion pushes away
-    joint_limit_stiffness: float = _nonnegative(default=20.0)  # N m/rad of that push (0: off)
+    joint_limit_stiffness: float = _nonnegative(default=5.0)  # N m/rad of that push (0: off)
     stop_time: float = _positive(default=0.1)  # s, time constant of the null-space brake when the RCM cannot be kept
 
 

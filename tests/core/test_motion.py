@@ -103,3 +103,21 @@ def test_joint_limit_push_acts_only_inside_the_zone_and_only_on_the_self_motion(
     tau = self_motion_projector(kin, Minv) @ g
     assert np.linalg.norm(kin.J_E @ Minv @ tau) < 1e-6 * np.linalg.norm(Minv @ g)
     assert g @ Minv @ tau > 0.0  # what is left still pushes away from the limits
+
+
+def test_self_motion_moves_a_joint_out_of_its_limit_zone_without_moving_the_scope() -> None:
+    from lapwrench.virtual import run_virtual
+
+    cfg = load()
+    lim = RobotModel("panda").limits
+    q0 = DEFAULT_Q0.copy()
+    q0[2] = lim.position_upper[2] - cfg.robot.position_margin - 0.1  # 0.2 rad into joint 3's zone
+    ctrl, log = run_virtual(cfg, 2.0, q0=q0)
+    q_end = log.results[-1].q_ref
+    assert q_end[2] < q0[2] - 0.02  # pushed away from the limit
+    kin0 = ctrl.model.kinematics(q0, np.zeros(7))
+    kin1 = ctrl.model.kinematics(q_end, np.zeros(7))
+    assert np.linalg.norm(kin1.p_E - kin0.p_E) < 1e-3 and np.linalg.norm(kin1.d_z - kin0.d_z) < 5e-3
+    off = load().replace(motion={"joint_limit_stiffness": 0.0})
+    _, log_off = run_virtual(off, 2.0, q0=q0)
+    assert abs(log_off.results[-1].q_ref[2] - q0[2]) < 1e-6  # without the push the joint stays

@@ -267,3 +267,20 @@ def test_measure_scope_at_the_measured_joints() -> None:
     assert np.isnan(bad.rcm_error) and np.isnan(bad.depth)
     assert np.isnan(measure_scope(model, DEFAULT_Q0, np.array([np.nan, 0.0, 0.0])).rcm_error)
     assert np.isnan(measure_scope(model, np.zeros(6), np.zeros(3)).depth)
+
+
+def test_a_braking_controller_is_followed_to_rest_then_held_with_an_alarm(limits) -> None:
+    """TickResult.rcm_infeasible: the controller's own braking commands pass (they keep the RCM as far
+    as the limits allow); once they are at rest the arm holds with an alarm."""
+    s, q, cmds = moving(limits)
+    v = s.command_state[1]
+    # a reference braking uniformly from its speed to rest over 0.5 s
+    for k in range(1, 511):
+        q = q + DT * v * max(0.0, 1.0 - k / 500.0)
+        cmds.append(s.filter(0.3 + k * DT, q, rcm_error=0.001, depth=0.058, controller_stopping=True))
+        if s.alarm:
+            break
+        assert s.state is SupervisorState.RUNNING and np.array_equal(cmds[-1], q)  # passed unchanged
+    assert s.alarm and s.alarm_reason.startswith("rcm_infeasible")
+    assert any(e.kind == "rcm_infeasible" and "braking" in e.message for e in s.events)
+    assert_stopped_at_rest_inside_limits(s, q, cmds, limits)

@@ -80,3 +80,31 @@ def test_exception_in_the_controller_tick_stops_at_rest_with_an_alarm(monkeypatc
         loop.step(30.0)
     assert err.value.reason == "controller_error: LinAlgError: Singular matrix"
     assert_at_rest_inside_limits(loop, sent)
+
+
+def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_supervisor_holds() -> None:
+    """Joint boxes narrowed to nothing on six joints: the 2-row RCM task has no room, the controller
+    latches its stop (cues off, null-space brake) and the supervisor holds once it is at rest."""
+    loop = ClosedLoop(load())
+    sent = recording(loop)
+    ctrl = loop.controller
+    real_bounds = ctrl.shaper.acceleration_bounds
+    p, d = loop.world.shaft_axis()
+    push = np.cross(d, [0.0, 0.0, 1.0])
+    push = 20.0 * push / np.linalg.norm(push)
+
+    def frozen(state):  # type: ignore[no-untyped-def]
+        lo, hi = (b.copy() for b in real_bounds(state))
+        if loop.t > 0.2:  # from 0.2 s on, only joint 1 may change its acceleration toward zero
+            lo[1:] = hi[1:] = np.clip(0.0, lo[1:], hi[1:])
+        return lo, hi
+
+    ctrl.shaper.acceleration_bounds = frozen  # type: ignore[method-assign]
+    with pytest.raises(SafetyStopError) as stop:
+        for _ in range(3000):
+            loop.world.set_hand_wrench(np.r_[push, 0.0, 0.0, 0.0])
+            loop.step(grip_force=30.0)
+    assert str(stop.value.reason).startswith("rcm_infeasible"), stop.value.reason
+    assert ctrl.stopping
+    assert_at_rest_inside_limits(loop, sent)
+    assert loop.physical_rcm_error() < 2e-3

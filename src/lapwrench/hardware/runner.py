@@ -388,6 +388,7 @@ class ControlLoop:
                     residual=residual,
                     q_measured=reading.q,
                     compute_time=compute,
+                    controller_stopping=result is not None and result.rcm_infeasible,
                 )
                 robot.command(q_cmd)
                 cycle = 0.0 if t_prev is None else t_read - t_prev

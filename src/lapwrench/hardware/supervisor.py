@@ -60,6 +60,9 @@ from lapwrench.robot.limits import JointLimits
 from lapwrench.robot.model import RobotModel
 from lapwrench.spatial import Vec
 
+# Seconds a braking controller (TickResult.rcm_infeasible) may take to reach rest before the hold.
+CONTROLLER_STOP_TIMEOUT = 1.0
+
 
 def _measured_bounds(safety: SafetyConfig, envelope: EnvelopeConfig) -> dict[str, float]:
     """The supervisor's measured-state bounds from the config sections (m, m, m, N)."""
@@ -221,6 +224,7 @@ class SafetySupervisor:
         self._counts: dict[str, int] = {}
         self._joint_warned = False
         self._residual_over_since: float | None = None
+        self._controller_stop_since: float | None = None
         self._q = np.zeros(7)
         self._v = np.zeros(7)
         self._a = np.zeros(7)
@@ -237,6 +241,7 @@ class SafetySupervisor:
         self.alarm, self.alarm_reason = False, None
         self.consecutive_misses = 0
         self._residual_over_since = None
+        self._controller_stop_since = None
         self._started = True
         self.event(time, "start", "supervision started at rest")
 
@@ -405,6 +410,16 @@ class SafetySupervisor:
                     f" for {(time - self._residual_over_since) * 1e3:.0f} ms",
                 )
 
+    def _watch_controller_stop(self, time: float, stopping: bool) -> None:
+        if not stopping or self.state is not SupervisorState.RUNNING:
+            return
+        if self._controller_stop_since is None:
+            self._controller_stop_since = time
+            self.event(time, "rcm_infeasible", "the RCM task cannot be kept inside the joint limits; braking")
+        at_rest = float(np.max(np.abs(self._v))) < 10.0 * self.cfg.rest_velocity
+        if at_rest or time - self._controller_stop_since >= CONTROLLER_STOP_TIMEOUT:
+            self._hold(time, "rcm_infeasible", "the RCM task could not be kept inside the joint limits")
+
     def _watch_deadline(self, time: float, compute_time: float) -> None:
         c = self.cfg
         if compute_time > c.cycle_budget:
@@ -429,6 +444,7 @@ class SafetySupervisor:
         residual: Vec | None = None,
         q_measured: Vec | None = None,
         compute_time: float | None = None,
+        controller_stopping: bool = False,
     ) -> Vec:
         """The command to send this cycle.
 
@@ -443,6 +459,10 @@ class SafetySupervisor:
                 |ΔF| over ``max_residual_force`` → hold. None when either sensor is unavailable.
             q_measured: The robot's measured joints (rad): near a limit or not finite → hold.
             compute_time: This cycle's compute time (s); None skips the deadline watch.
+            controller_stopping: The controller could not keep the RCM task inside the joint limits
+                and is braking its reference to rest while keeping the task as far as it can
+                (``TickResult.rcm_infeasible``): its commands pass until they are at rest (or for
+                ``CONTROLLER_STOP_TIMEOUT``), then the arm holds with an alarm.
         """
         if not self._started:
             raise RuntimeError("call SafetySupervisor.start(q0) before filter()")
@@ -451,6 +471,7 @@ class SafetySupervisor:
         if q_measured is not None:
             self._watch_joints(time, q_measured)
         self._watch_scope(time, rcm_error, depth, residual)
+        self._watch_controller_stop(time, controller_stopping)
 
         if self.state is SupervisorState.HOLDING:
             q = self._q.copy()

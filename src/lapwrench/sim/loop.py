@@ -231,7 +231,13 @@ class ClosedLoop:
             q_ref, p_R, residual = reading.q, self.controller.rcm.p_R, None  # type: ignore[union-attr]
         measured = measure_scope(self.model, reading.q, p_R)
         q_cmd = sup.filter(
-            t, q_ref, rcm_error=measured.rcm_error, depth=measured.depth, residual=residual, q_measured=reading.q
+            t,
+            q_ref,
+            rcm_error=measured.rcm_error,
+            depth=measured.depth,
+            residual=residual,
+            q_measured=reading.q,
+            controller_stopping=result is not None and result.rcm_infeasible,
         )
         self.events.extend(sup.drain_events())
         if before_physics is not None:
