@@ -89,7 +89,7 @@ def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_superviso
     sent = recording(loop)
     ctrl = loop.controller
     real_bounds = ctrl.shaper.acceleration_bounds
-    p, d = loop.world.shaft_axis()
+    _, d = loop.world.shaft_axis()
     push = np.cross(d, [0.0, 0.0, 1.0])
     push = 20.0 * push / np.linalg.norm(push)
 
