@@ -194,7 +194,7 @@ class Controller:
             tau = np.zeros(7)
         dq_next = euler_velocity_step(kin, tau, damping, self.dt, self.cfg.motion.integrator)
 
-        # 7. limits that keep the RCM task (SNS) → command
+        # 7. limits and envelope met by the lower-priority motion only (motion/saturation.py) → command
         bounds = self.shaper.acceleration_bounds(self.ref)
         sat = self._saturate(kin, geo, Minv, (dq_next - kin.dq) / self.dt, bounds, frame.time)
         self.ref = self.shaper.advance(self.ref, sat.a, bounds)
