@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
@@ -46,37 +47,70 @@ def _per_joint_clamp(ctrl: Controller) -> None:
     ctrl._saturate = clamp  # type: ignore[method-assign]
 
 
-def time_ticks(cfg: Config, ticks: int, push_n: float, saturation: bool) -> tuple[list[int], float]:
-    """Tick times (ns) with a moving hand force (plus ``push_n`` N along the shaft), a moving
-    instrument and a residual force; and the fraction of ticks in which a limit was active."""
-    ctrl = Controller(cfg)
-    ctrl.reset(DEFAULT_Q0)
-    if not saturation:
-        _per_joint_clamp(ctrl)
-    rng = np.random.default_rng(0)
+@dataclass
+class Variant:
+    """One controller of the comparison and the tick times (ns) it took."""
+
+    ctrl: Controller
+    push_n: float
+    tick_ns: list[int] = field(default_factory=list)
+    step_ns: list[int] = field(default_factory=list)  # the saturation step (or the clamp) alone
+    active: int = 0
+
+    def __post_init__(self) -> None:
+        step = self.ctrl._saturate
+
+        def timed(*args):  # type: ignore[no-untyped-def]
+            t0 = time.perf_counter_ns()
+            out = step(*args)
+            self.step_ns.append(time.perf_counter_ns() - t0)
+            return out
+
+        self.ctrl._saturate = timed  # type: ignore[method-assign]
+
+
+def _frame(v: Variant, k: int, rng: np.random.Generator, tactile: TactileReading) -> SensorFrame:
+    """A moving hand force (plus ``push_n`` N along the shaft, alternating in and out every 3 s so the
+    scope keeps moving between the depth walls), a moving instrument and a residual force."""
+    ctrl = v.ctrl
+    t = k * ctrl.dt
+    axial = v.push_n * (1.0 if (k // 3000) % 2 == 0 else -1.0)
+    force = np.array([4.0 * np.sin(t), 3.0, axial]) + 0.05 * rng.standard_normal(3)
+    assert ctrl.ref is not None
+    return SensorFrame(
+        t,
+        ForceTorqueReading(force, np.zeros(3), t),
+        tactile,
+        InstrumentObservation(np.array([[480.0 + 50 * np.sin(t), 300.0], [150.0, 200.0]]), t),
+        RobotReading(ctrl.ref.q, ctrl.ref.dq, np.array([7.0, 0.0, 0.0]), t),
+    )
+
+
+def time_interleaved(cfg: Config, ticks: int) -> dict[str, Variant]:
+    """Four controllers ticked in turn, so a machine that speeds up or slows down affects all alike:
+    with and without the saturation step, with a light hand and with a 30 N axial push."""
+    variants = {}
+    for name, push, saturation in (("tick", 0.0, True), ("clamp", 0.0, False), ("push", 30.0, True),
+                                   ("push_clamp", 30.0, False)):
+        ctrl = Controller(cfg)
+        ctrl.reset(DEFAULT_Q0)
+        if not saturation:
+            _per_joint_clamp(ctrl)
+        variants[name] = Variant(ctrl, push)
+        variants[name].step_ns.clear()
+    rngs = {name: np.random.default_rng(0) for name in variants}
     tactile = TactileReading(np.full(64, 62.5))
     clock = time.perf_counter_ns
-    tick_ns: list[int] = []
-    active = 0
     for k in range(ticks + 1000):
-        t = k * ctrl.dt
-        # alternate the axial push so the scope keeps moving between the depth walls
-        axial = push_n * (1.0 if (k // 3000) % 2 == 0 else -1.0)
-        force = np.array([4.0 * np.sin(t), 3.0, axial]) + 0.05 * rng.standard_normal(3)
-        frame = SensorFrame(
-            t,
-            ForceTorqueReading(force, np.zeros(3), t),
-            tactile,
-            InstrumentObservation(np.array([[480.0 + 50 * np.sin(t), 300.0], [150.0, 200.0]]), t),
-            RobotReading(ctrl.ref.q, ctrl.ref.dq, np.array([7.0, 0.0, 0.0]), t),
-        )
-        t0 = clock()
-        res = ctrl.tick(frame)
-        dt_ns = clock() - t0
-        if k >= 1000:
-            tick_ns.append(dt_ns)
-            active += bool(res.limits_active)
-    return tick_ns, active / ticks
+        for name, v in variants.items():
+            frame = _frame(v, k, rngs[name], tactile)
+            t0 = clock()
+            res = v.ctrl.tick(frame)
+            dt_ns = clock() - t0
+            if k >= 1000:
+                v.tick_ns.append(dt_ns)
+                v.active += bool(res.limits_active)
+    return variants
 
 
 def main() -> None:
@@ -88,11 +122,12 @@ def main() -> None:
         ap.error("--ticks must be at least 100")
 
     cfg = load().replace(robot={"kind": args.robot})
-    ctrl = Controller(cfg)
-    tick_ns, _ = time_ticks(cfg, args.ticks, 0.0, True)
-    clamp_ns, _ = time_ticks(cfg, args.ticks, 0.0, False)
-    push_ns, push_active = time_ticks(cfg, args.ticks, 30.0, True)
-    push_clamp_ns, _ = time_ticks(cfg, args.ticks, 30.0, False)
+    variants = time_interleaved(cfg, args.ticks)
+    ctrl = variants["tick"].ctrl
+    tick_ns, clamp_ns = variants["tick"].tick_ns, variants["clamp"].tick_ns
+    push_ns, push_clamp_ns = variants["push"].tick_ns, variants["push_clamp"].tick_ns
+    push_active = variants["push"].active / args.ticks
+    step = {name: percentiles_us(v.step_ns[1000:]) for name, v in variants.items()}
     model, data = ctrl.model.model, ctrl.model.data
     clock = time.perf_counter_ns
     cat_ns: list[int] = []
@@ -117,7 +152,12 @@ def main() -> None:
     print(f"per-joint clamp tick p50 {clamp50:8.1f} us   p99 {clamp99:8.1f} us (the old shaper, same demand)")
     print(f"30 N axial push      p50 {push50:8.1f} us   p99 {push99:8.1f} us ({push_active:.0%} of ticks at a limit)")
     print(f"  per-joint clamp    p50 {pclamp50:8.1f} us   p99 {pclamp99:8.1f} us")
-    print(f"saturation adds      p99 {tick99 - clamp99:8.1f} us, {push99 - pclamp99:8.1f} us pushing (target <= 50 us)")
+    print(f"saturation adds      p99 {tick99 - clamp99:8.1f} us, {push99 - pclamp99:8.1f} us pushing (tick p99s)")
+    for name, (s50, s99) in step.items():
+        print(f"  step alone {name:11s} p50 {s50:8.1f} us   p99 {s99:8.1f} us")
+    added = step["tick"][1] - step["clamp"][1]
+    added_push = step["push"][1] - step["push_clamp"][1]
+    print(f"step adds            p99 {added:8.1f} us, {added_push:8.1f} us pushing (target <= 50 us)")
     print(
         json.dumps(
             {
@@ -134,6 +174,11 @@ def main() -> None:
                 "push_limit_active_fraction": round(push_active, 3),
                 "saturation_added_p99_us": round(tick99 - clamp99, 2),
                 "saturation_added_push_p99_us": round(push99 - pclamp99, 2),
+                "step_p99_us": round(step["tick"][1], 2),
+                "step_push_p99_us": round(step["push"][1], 2),
+                "clamp_step_p99_us": round(step["clamp"][1], 2),
+                "step_added_p99_us": round(added, 2),
+                "step_added_push_p99_us": round(added_push, 2),
             }
         )
     )

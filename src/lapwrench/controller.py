@@ -258,11 +258,13 @@ class Controller:
         J_task = kin.R_E[:, :2].T @ geo.J_R
         if self.stopping:
             a_d = a_d - self._null_brake(J_task, Minv, kin.dq)
-        rows = LimitRows.joint_box(*bounds, self.shaper.lim.acceleration)
-        env = self.envelope.rows(kin, geo.p_R, a_d, self.feedback.depth_offset)
-        if env is not None:
-            rows = LimitRows.stack(rows, env)
-        sat = saturate(a_d, J_task, kin.M, rows)
+        box = LimitRows.joint_box(*bounds, self.shaper.lim.acceleration)
+        env = self.envelope.rows(kin, geo.p_R, a_d, self.feedback.depth_offset)  # on the twist of {E}
+        if box.admits(a_d) and (env is None or env.admits(kin.J_E @ a_d)):
+            sat = SaturationResult(a_d, (), (), True)  # nothing to saturate: the common case
+        else:
+            rows = box if env is None else LimitRows.stack(box, env.through(kin.J_E))
+            sat = saturate(a_d, J_task, kin.M, rows)
         self.infeasible_ticks = 0 if sat.feasible else self.infeasible_ticks + 1
         if self.infeasible_ticks >= INFEASIBLE_TICKS_TO_STOP and not self.stopping:
             self.stopping = True

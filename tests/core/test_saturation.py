@@ -114,8 +114,8 @@ def test_controller_references_stay_inside_the_franka_limits_under_random_demand
 
 
 def test_the_controller_stops_when_the_rcm_task_cannot_be_kept() -> None:
-    """A joint box of zero width on all but one joint leaves no room for the 2-row task: the
-    controller latches ``stopping``, switches the cues off and ends at rest."""
+    """Six joints forced to one acceleration by zero-width boxes leave one joint for the 2-row
+    task: the controller latches ``stopping`` and reports it."""
     cfg = load()
     ctrl = Controller(cfg)
     ctrl.reset(DEFAULT_Q0)
@@ -124,7 +124,8 @@ def test_the_controller_stops_when_the_rcm_task_cannot_be_kept() -> None:
     def frozen(state: ReferenceState) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = real_bounds(state)
         lo, hi = lo.copy(), hi.copy()
-        lo[1:], hi[1:] = np.maximum(lo[1:], 0.0), np.maximum(lo[1:], 0.0)
+        forced = np.clip(0.5, lo[1:], hi[1:])  # inside the real bounds
+        lo[1:], hi[1:] = forced, forced
         return lo, hi
 
     ctrl.shaper.acceleration_bounds = frozen  # type: ignore[method-assign]

@@ -21,9 +21,8 @@ import numpy as np
 
 from lapwrench.config import EnvelopeConfig
 from lapwrench.motion.saturation import LimitRows
-from lapwrench.rcm.geometry import insertion_depth
 from lapwrench.robot.model import Kinematics
-from lapwrench.spatial import Mat, Vec, cross
+from lapwrench.spatial import Mat, Vec
 
 # Time constant (s) with which a rate approaches its envelope limit.
 APPROACH_TIME = 0.01
@@ -65,14 +64,23 @@ def rate_row_bounds(y: float, y_lo: float, y_hi: float, deceleration: float, dt:
     return lo, max(lo, hi)
 
 
-def insertion_rate_row(kin: Kinematics, p_R: Vec) -> Vec:
-    """Row c with depth rate = cᵀ θ̇: d/dt [L - d_zᵀ(p_R - p_E)] = d_zᵀ v_E - (d_z × r)ᵀ ω_E, r = p_R - p_E.
+def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def insertion_rate_weights(d: tuple[float, float, float], r: tuple[float, float, float]) -> list[float]:
+    """Weights w of the twist [ω; v] of {E} with depth rate = wᵀ [ω; v] (so the row is wᵀ J_E):
+
+        d/dt [L - d_zᵀ (p_R - p_E)] = d_zᵀ v_E - (d_z × r)ᵀ ω_E,   r = p_R - p_E.
 
     (The motion of the adaptive point p_R is left out: it is slow and not the arm's doing.)
     """
-    d = kin.d_z
-    r = p_R - kin.p_E
-    return d @ kin.J_E[3:] - cross(d, r) @ kin.J_E[:3]
+    k = _cross(d, r)
+    return [-k[0], -k[1], -k[2], d[0], d[1], d[2]]
 
 
 def roll_angle(R_E: Mat, R_E0: Mat) -> float:
@@ -81,11 +89,13 @@ def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     The start frame's x axis is carried by the shortest rotation taking the start axis d_0 to the
     current d_z; the roll is the angle from that axis to the current x axis, about d_z.
     """
-    d0, d = R_E0[:, 2], R_E[:, 2]
-    x0, x = R_E0[:, 0], R_E[:, 0]
-    k = cross(d0, d)
-    x0s = x0 + cross(k, x0) + cross(k, cross(k, x0)) / (1.0 + float(d0 @ d))
-    return math.atan2(float(cross(x0s, x) @ d), float(x0s @ x))
+    (x0, _, d0), (x, _, d) = (tuple(c) for c in R_E0.T.tolist()), (tuple(c) for c in R_E.T.tolist())
+    k = _cross(d0, d)
+    kx0 = _cross(k, x0)
+    kkx0 = _cross(k, kx0)
+    c = 1.0 + _dot(d0, d)
+    x0s = (x0[0] + kx0[0] + kkx0[0] / c, x0[1] + kx0[1] + kkx0[1] / c, x0[2] + kx0[2] + kkx0[2] / c)
+    return math.atan2(_dot(_cross(x0s, x), d), _dot(x0s, x))
 
 
 class Envelope:
@@ -102,27 +112,33 @@ class Envelope:
         self.R_E0 = kin.R_E.copy()
 
     def rows(self, kin: Kinematics, p_R: Vec, a_d: Vec, depth_offset: float = 0.0) -> LimitRows | None:
-        """The envelope's rows at this tick; ``a_d`` (the desired acceleration) orients the pivot row
-        when the scope is at rest; ``depth_offset`` (m) is what the measured pose adds to the depth."""
+        """The envelope's rows at this tick, on the *twist* acceleration of {E} (map them to the joints
+        with :meth:`LimitRows.through` ``(kin.J_E)``). ``a_d`` (the desired acceleration) orients the
+        pivot rows when the scope is at rest; ``depth_offset`` (m) is what the measured pose adds."""
         cfg, dt = self.cfg, self.dt
         if not cfg.enabled or self.R_E0 is None:
             return None
-        dq, d = kin.dq, kin.d_z
-        J_w = kin.J_E[:3]
+        d = tuple(kin.d_z.tolist())
+        r = tuple((p_R - kin.p_E).tolist())
+        twist_v = kin.J_E @ kin.dq
+        twist = twist_v.tolist()
         # pivot: |ω⊥| bounded along its current direction u1 and across it (u2), so the polygon
         # re-aligned every tick keeps the norm at the limit; from rest, along the desired motion
-        w = kin.P @ (J_w @ dq)
-        if w @ w < 1e-12:
-            w = kin.P @ (J_w @ (dq + dt * a_d))
-        w_norm = math.sqrt(float(w @ w))
-        u1 = w / w_norm if w_norm > 1e-9 else kin.R_E[:, 0]
-        C = np.empty((4, dq.shape[0]))
-        C[0] = insertion_rate_row(kin, p_R)
-        C[1:] = np.array((u1, cross(d, u1), d)) @ J_w
-        y = C @ dq
+        w = (twist[0], twist[1], twist[2])
+        if _perp_norm2(w, d) < 1e-12:
+            w = tuple((kin.J_E[:3] @ (kin.dq + dt * a_d)).tolist())
+        wd = _dot(w, d)
+        u = (w[0] - wd * d[0], w[1] - wd * d[1], w[2] - wd * d[2])
+        n = math.sqrt(_dot(u, u))
+        u1 = (u[0] / n, u[1] / n, u[2] / n) if n > 1e-9 else tuple(kin.R_E[:, 0].tolist())
+        u2 = _cross(d, u1)
+        W = np.array(
+            (insertion_rate_weights(d, r), (*u1, 0.0, 0.0, 0.0), (*u2, 0.0, 0.0, 0.0), (*d, 0.0, 0.0, 0.0))
+        )
+        y = (W @ twist_v).tolist()
         # position walls: the room left once the rate has followed its bound (it lags by T)
         T = max(APPROACH_TIME, dt)
-        depth = insertion_depth(kin, p_R, self.length) + depth_offset
+        depth = self.length - _dot(d, r) + depth_offset
         v_max, a_in = cfg.insertion_speed_max, cfg.insertion_deceleration
         v_in = wall_speed(cfg.depth_max - DEPTH_WALL_MARGIN - depth - max(y[0], 0.0) * T, a_in, v_max)
         v_out = wall_speed(depth - cfg.depth_min - DEPTH_WALL_MARGIN + min(y[0], 0.0) * T, a_in, v_max)
@@ -132,7 +148,7 @@ class Envelope:
         w_neg = wall_speed(roll + cfg.roll_range + min(y[3], 0.0) * T, a_w, r_max)
         p_max = cfg.pivot_speed_max
         limits = ((-v_out, v_in, a_in), (-p_max, p_max, a_w), (-p_max, p_max, a_w), (-w_neg, w_pos, a_w))
-        bounds = [rate_row_bounds(float(y_k), *lim, dt) for y_k, lim in zip(y, limits, strict=True)]
+        bounds = [rate_row_bounds(y_k, *lim, dt) for y_k, lim in zip(y, limits, strict=True)]
         names = (
             _wall_name(v_out, v_in, v_max, "depth_min", "depth_max", "insertion_speed"),
             "pivot_speed",
@@ -140,4 +156,14 @@ class Envelope:
             _wall_name(w_neg, w_pos, r_max, "roll_range", "roll_range", "roll_speed"),
         )
         lo, hi = np.array(bounds).T
-        return LimitRows(C, lo, hi, np.array((a_in, a_w, a_w, a_w)), names, np.zeros(4, dtype=bool))
+        return LimitRows(W, lo, hi, np.array((a_in, a_w, a_w, a_w)), names, _SOFT)
+
+
+def _perp_norm2(w: tuple[float, float, float], d: tuple[float, float, float]) -> float:
+    """|P w|² for the projector P orthogonal to d."""
+    wd = _dot(w, d)
+    return _dot(w, w) - wd * wd
+
+
+_SOFT = np.zeros(4, dtype=bool)
+_SOFT.flags.writeable = False

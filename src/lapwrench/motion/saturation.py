@@ -73,6 +73,14 @@ class LimitRows:
         eye, names, hard = _box_constants(n)
         return LimitRows(eye, a_lo, a_hi, a_max, names, hard)
 
+    def through(self, J: Mat) -> LimitRows:
+        """Rows on x mapped to rows on a through x = J a (e.g. twist rows through J_E)."""
+        return LimitRows(self.C @ J, self.lo, self.hi, self.scale, self.names, self.hard)
+
+    def admits(self, x: Vec) -> bool:
+        """True if x meets every row (up to the round-off tolerance)."""
+        return not (_violations(self, x) > VIOLATION_TOL).any()
+
     @staticmethod
     def stack(*parts: LimitRows) -> LimitRows:
         return LimitRows(
@@ -108,6 +116,17 @@ def _violations(rows: LimitRows, a: Vec) -> Vec:
     """Each row's violation, normalised by its scale (<= 0: satisfied)."""
     y = rows.C @ a
     return np.maximum(rows.lo - y, y - rows.hi) / rows.scale
+
+
+def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
+    """min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d and every row; None if infeasible."""
+    widen = BOX_WIDENING * rows.scale
+    A = np.vstack([J, rows.C, -rows.C]).T
+    b = np.concatenate([J @ a_d, rows.lo - widen, -rows.hi - widen])
+    try:
+        return quadprog.solve_qp(M, M @ a_d, A, b, J.shape[0])[0]
+    except ValueError:  # "constraints are inconsistent" or linearly dependent
+        return None
 
 
 def _solve(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> tuple[Vec, Vec] | None:
@@ -170,8 +189,14 @@ def saturate(a_d: Vec, J: Mat, M: Mat, rows: LimitRows) -> SaturationResult:
         M: Joint-space inertia (n x n).
         rows: The limits; ``hard`` rows are the robot's, the others the envelope's.
     """
-    if not np.isfinite(a_d).all() or not (_violations(rows, a_d) > VIOLATION_TOL).any():
+    if not np.isfinite(a_d).all() or rows.admits(a_d):
         return SaturationResult(a_d, (), (), True)
+    a = _solve_exact(a_d, M, J, rows)  # every row met: the common case, a smaller QP
+    if a is not None:
+        return SaturationResult(a, _saturated(rows, a), (), True)
+    if rows.hard.all():
+        a = _closest_task(a_d, M, J, rows)
+        return SaturationResult(a, _saturated(rows, a), (), False)
     sol = _solve(a_d, M, J, rows)
     if sol is None:
         a = _closest_task(a_d, M, J, rows)
