@@ -160,7 +160,9 @@ def run_input_fault(robot: Any, cfg: Config, fault: str) -> tuple[Any, Any]:
 
 def check_input_fault(fault: str, stats: Any, log: Any) -> None:
     assert stats.alarm is None
-    late = [c for c in log.cycles if c.t > 0.5]
+    # the fault starts at 0.3 s of robot time (the hand publishes on robot time); on a busy machine
+    # franky-sim runs below real time, so "late" is counted in robot time too
+    late = [c for c in log.cycles if c.robot_time > 0.5]
     assert late, "no cycles after the fault"
     # that wrench is off once the fault is on
     assert all(np.allclose(c.wrenches["interaction"], 0.0) for c in late)

@@ -16,9 +16,9 @@ problem is solved exactly, as a small hierarchical QP, with the Goldfarb-Idnani 
 method (``quadprog``, a few µs for 7 joints):
 
 1. the RCM task and the robot's joint limits, together (hard constraints);
-2. the envelope, as constraints relaxed by slack variables with a weight far above the rest
-   (SLACK_WEIGHT): exact whenever level 1 leaves room, and otherwise as close as level 1 allows
-   (the robot's limits win over the envelope);
+2. the envelope: first as hard constraints too (the common case, the smaller QP); if levels 1
+   and 2 together have no solution, relaxed by slack variables with a weight far above the rest
+   (SLACK_WEIGHT), so it is met as closely as level 1 allows (the robot's limits win);
 3. the rest of the motion as close as possible to a_d.
 
 If level 1 has no solution, the RCM task cannot be kept inside the joint limits: the result says
@@ -194,10 +194,7 @@ def saturate(a_d: Vec, J: Mat, M: Mat, rows: LimitRows) -> SaturationResult:
     a = _solve_exact(a_d, M, J, rows)  # every row met: the common case, a smaller QP
     if a is not None:
         return SaturationResult(a, _saturated(rows, a), (), True)
-    if rows.hard.all():
-        a = _closest_task(a_d, M, J, rows)
-        return SaturationResult(a, _saturated(rows, a), (), False)
-    sol = _solve(a_d, M, J, rows)
+    sol = None if rows.hard.all() else _solve(a_d, M, J, rows)
     if sol is None:
         a = _closest_task(a_d, M, J, rows)
         return SaturationResult(a, _saturated(rows, a), (), False)
