@@ -206,10 +206,11 @@ def _printed_damping_check(plan: DemoPlan, bar: object) -> str:
             "and give the tracking cue its own k_t_unguided = 2 N m s (the printed k_t = 150 stays for the hand)."
         )
     m = res.metrics
+    median = m.get("tracking_error_median_px")
+    tracking = "no instrument tracked" if median is None else f"tracking error median {median:.0f} px"
     return (
-        "Needle search with the printed damping completed: RCM max "
-        f"{m['rcm_error_max_mm']:.2f} mm, tracking error median {m.get('tracking_error_median_px')} px, "
-        f"insertion drift {m['insertion_drift_mm']:.1f} mm."
+        "Needle search with the printed damping completed (the envelope's depth walls now keep the scope in): "
+        f"RCM max {m['rcm_error_max_mm']:.2f} mm, {tracking}, insertion drift {m['insertion_drift_mm']:.1f} mm."
     )
 
 
@@ -226,7 +227,7 @@ def _notes(plan: DemoPlan) -> list[str]:
         "the view at ~0.2 deg/s and the insertion axis is almost free (see the check below).",
         "tracking.direction = image_plane (the text of eq 12); the printed eq 12 also retracts the scope.",
         "The simulated surgeon: force-driven hand in grip (same effort at every grip), speed-driven hand "
-        "(0.25 rad/s) in the tracking scenarios.",
+        "(0.25 rad/s, at most 25 N) in the tracking scenarios.",
         f"Simulation time scale {plan.time_scale} (1 = the paper's durations).",
         f"Machine: {os.cpu_count()} CPUs; MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}; ffmpeg: "
         f"{'yes' if shutil.which('ffmpeg') or _has_imageio_ffmpeg() else 'no'}.",

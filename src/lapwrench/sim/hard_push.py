@@ -17,7 +17,7 @@ joint-torque estimate catches up). ``time_scale`` shortens the push and the sett
 A safety hold (:class:`~lapwrench.sim.loop.SafetyStopError`) ends a run and is recorded as its
 alarm; so is a simulation stop (:class:`~lapwrench.sim.world.SimulationUnstableError`, e.g. the
 scope leaving the trocar). Each run is checked against the issue's targets: physical RCM error
-≤ 2 mm, trocar force ≤ 10 N, scope tip depth beyond the incision inside the envelope's
+≤ 2 mm, trocar force ≤ 10 N, scope tip depth beyond the unloaded incision point inside the envelope's
 [depth_min, depth_max], every joint reference inside the Franka limits.
 """
 
