@@ -284,8 +284,8 @@ def _hard_push_section(res: ScenarioResult, figures: list[str]) -> list[str]:
         f"over 50 ms), lets go, and the run settles for {_fmt(m['settle_s'])} s. Targets: physical RCM error ≤ "
         f"{tg['rcm_error_max_mm']:g} mm, trocar force ≤ {tg['trocar_force_max_N']:g} N, scope tip depth beyond "
         f"the unloaded incision point inside [{tg['tip_depth_min_mm']:g}, {tg['tip_depth_max_mm']:g}] mm "
-        "(envelope depth range; start depth below), every joint reference inside the Franka limits. A safety hold ends a run (its state "
-        "at rest counts); a simulation stop (e.g. the scope left the trocar) fails it.",
+        "(envelope depth range; start depth below), every joint reference inside the Franka limits. A safety "
+        "hold ends a run (its state at rest counts); a simulation stop (e.g. the scope left the trocar) fails it.",
         "",
         "| run | δ̄ | RCM max mm | trocar F max N | tilt max ° | depth change mm: min / max (tip depth) | envelope hits "
         "(ticks: walls) | alarm | refs in limits | result |",
