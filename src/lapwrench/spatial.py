@@ -22,13 +22,6 @@ def skew(v: Vec) -> Mat:
     return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
 
 
-def cross(a: Vec, b: Vec) -> Vec:
-    """a x b for two 3-vectors (np.cross costs ~10x more for one pair)."""
-    a1, a2, a3 = a.tolist()
-    b1, b2, b3 = b.tolist()
-    return np.array((a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1))
-
-
 def wrench_transform(p_from: Vec, p_to: Vec) -> Mat:
     """Eq (39): Q moves a wrench taken about ``p_from`` to the equivalent wrench about ``p_to``.
 
