@@ -34,7 +34,7 @@ import numpy as np
 from lapwrench.config import Config
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
 from lapwrench.sim.scenarios import Run, ScenarioOptions, ScenarioResult, run_metrics
-from lapwrench.sim.surgeon import SpeedDrivenHand, axis_angle
+from lapwrench.sim.surgeon import SpeedDrivenHand, across_shaft, axis_angle
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError, SimWorld
 
 PUSH_S = 1.5  # s the hand pushes (full time scale)
@@ -125,8 +125,7 @@ class ConstantPush:
     def wrench(self, d: np.ndarray) -> np.ndarray:
         """The full wrench [f (N), τ (N m)] for the shaft direction ``d``."""
         if self.kind == "lateral":
-            f = self.axis - (self.axis @ d) * d
-            return np.concatenate([self.magnitude * f / np.linalg.norm(f), np.zeros(3)])
+            return np.concatenate([self.magnitude * across_shaft(self.axis, d), np.zeros(3)])
         along = math.copysign(self.magnitude, float(self.axis @ d)) * d
         return np.concatenate([np.zeros(3), along]) if self.kind == "roll" else np.concatenate([along, np.zeros(3)])
 

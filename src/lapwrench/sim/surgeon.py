@@ -24,6 +24,12 @@ import numpy as np
 from lapwrench.sim.world import SimWorld
 
 
+def across_shaft(v: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Unit vector of the part of ``v`` perpendicular to the shaft direction ``d``."""
+    u = v - (v @ d) * d
+    return u / max(np.linalg.norm(u), 1e-12)
+
+
 def axis_angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(math.acos(max(-1.0, min(1.0, float(a @ b)))))
 
@@ -69,8 +75,7 @@ class HandGuide:
             self.done_time = t
             world.set_hand_wrench(np.zeros(6))
             return 0.0
-        toward = self.target_axis - (self.target_axis @ d) * d  # where the tip must go
-        toward /= max(np.linalg.norm(toward), 1e-12)
+        toward = across_shaft(self.target_axis, d)  # where the tip must go
         if self.max_speed is None:
             self._integral += angle * dt
             magnitude = min(self.max_force, self.gain * angle + self.integral_gain * self._integral)
@@ -191,7 +196,6 @@ class SpeedDrivenHand:
         if not self.engaged and self._force <= 0.0:
             world.set_hand_wrench(np.zeros(6))
             return 0.0
-        toward = self.direction - (self.direction @ d) * d
-        toward /= max(np.linalg.norm(toward), 1e-12)
+        toward = across_shaft(self.direction, d)
         world.set_hand_wrench(np.concatenate([-self._force * toward, np.zeros(3)]))  # handle behind the pivot
         return self.grip_force
