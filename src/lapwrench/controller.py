@@ -168,8 +168,10 @@ class Controller:
         residual = self._residual(kin, inputs)
         residual_lateral = self.rcm.update(kin.P, residual, self.dt, kin.twist_E)
 
-        # 3. task geometry (eq 27-36)
-        geo = self._geometry(kin, inputs)
+        # 3. task geometry (eq 27-36), and what the measured pose adds to the RCM error
+        e_R = rcm_error(kin, self.rcm.p_R)
+        self.feedback.update(None if inputs.robot is None else inputs.robot.q, kin, self.rcm.p_R, e_R)
+        geo = self._geometry(kin, e_R)
         ctx = TickContext(frame.time, kin, geo, inputs)
 
         # 4. wrenches
@@ -282,11 +284,11 @@ class Controller:
             return None
         return residual_force(kin.R_H @ inputs.ft.force, inputs.robot.external_force)
 
-    def _geometry(self, kin: Kinematics, inputs: ValidInputs | None = None) -> TaskGeometry:
+    def _geometry(self, kin: Kinematics, e_R: Vec | None = None) -> TaskGeometry:
+        """The task geometry at ``kin``; ``e_R`` (eq 27) when the caller has it already."""
         assert self.rcm is not None
         p_R, L = self.rcm.p_R, self.cfg.scope.length
-        e_R = rcm_error(kin, p_R)
-        self.feedback.update(None if inputs is None or inputs.robot is None else inputs.robot.q, kin, p_R, e_R)
+        e_R = rcm_error(kin, p_R) if e_R is None else e_R
         lateral = self.cfg.motion.rcm_task == "lateral"
         J_R = lateral_rcm_jacobian(kin, p_R) if lateral else rcm_jacobian(kin, p_R)
         s_star = closest_point_parameter(kin, p_R, L)
