@@ -41,8 +41,10 @@ def percentiles_us(samples_ns: list[int]) -> tuple[float, float]:
 def _per_joint_clamp(ctrl: Controller) -> None:
     """Replace the saturation step by the old per-joint clamp (the reference for its cost)."""
 
-    def clamp(kin, geo, Minv, a_d, bounds, t):  # type: ignore[no-untyped-def]
-        return SaturationResult(np.clip(a_d, *bounds), (), (), True)
+    def clamp(r, t):  # type: ignore[no-untyped-def]
+        s = ctrl.compiled.sat
+        ctrl._a_lo, ctrl._a_hi = s.a_lo.copy(), s.a_hi.copy()
+        return SaturationResult(np.clip(s.a_d, s.a_lo, s.a_hi), (), (), True)
 
     ctrl._saturate = clamp  # type: ignore[method-assign]
 

@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 
 import numpy as np
 
-from lapwrench.spatial import Mat, Vec, Wrench
+from lapwrench.jit import kernel
+from lapwrench.spatial import Mat, Vec, skew
 
 # Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
 RCOND = 1e-10
 
 
+@kernel
 def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None, rcond: float = RCOND) -> Mat:
     """Eq (4): J⁺ = M⁻¹ Jᵀ (J M⁻¹ Jᵀ)⁻¹, the mass-matrix-weighted (dynamically consistent) inverse.
 
@@ -26,15 +27,17 @@ def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None
     d_zᵀ J_R = -(d_z x e_R)ᵀ J_Eω vanishes, and the smallest eigenvalue of J_R M⁻¹ J_Rᵀ scales as
     |e_R|² (about 1e-10 of the largest at |e_R| = 10 µm).
     """
-    A = J @ Minv @ J.T
+    JT = np.ascontiguousarray(J.T)
+    A = J @ Minv @ JT
     if null_direction is None:
         A_inv = regularised_inverse(A, rcond)
     else:
         nn = np.outer(null_direction, null_direction)
         A_inv = np.linalg.inv(A + nn) - nn
-    return Minv @ J.T @ A_inv
+    return Minv @ JT @ A_inv
 
 
+@kernel
 def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     """Inverse of a symmetric positive semi-definite A, damped along its near-null eigenvectors.
 
@@ -50,13 +53,14 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     """
     try:
         A_inv = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
+    except Exception:  # singular (numpy's LinAlgError; numba raises its own)
         return _damped_inverse(A, rcond)
-    if rcond * math.sqrt(np.vdot(A, A) * np.vdot(A_inv, A_inv)) <= 1.0:  # False on inf/nan
+    if rcond * math.sqrt(np.sum(A * A) * np.sum(A_inv * A_inv)) <= 1.0:  # False on inf/nan
         return A_inv
     return _damped_inverse(A, rcond)
 
 
+@kernel
 def _damped_inverse(A: Mat, rcond: float) -> Mat:
     """U diag(f(λ)) Uᵀ with f of :func:`regularised_inverse`."""
     lam, U = np.linalg.eigh(A)
@@ -68,24 +72,33 @@ def _damped_inverse(A: Mat, rcond: float) -> Mat:
     return (U * f) @ U.T
 
 
+@kernel
 def nullspace_projector(J: Mat, J_pinv: Mat) -> Mat:
     """Eq (3): N = I_n - J⁺ J."""
     return np.eye(J.shape[1]) - J_pinv @ J
 
 
-def nullspace_wrench(wrenches: Iterable[Wrench], p_G: Vec) -> Vec:
-    """Eq (38): W_n = Q_h W_h + Q_c W_c + W_f, every wrench moved to p_G with its Q (eq 39)."""
+@kernel
+def nullspace_wrench(W: Mat, points: Mat, p_G: Vec) -> Vec:
+    """Eq (38): W_n = Q_h W_h + Q_c W_c + W_f, every wrench moved to p_G with its Q (eq 39).
+
+    ``W`` holds one wrench ``[moment; force]`` per row, taken about the point in the same row of
+    ``points``. With Q of eq (39), Q_i W_i = [m_i + (p_i - p_G) x f_i; f_i].
+    """
     W_n = np.zeros(6)
-    for w in wrenches:
-        W_n += w.about(p_G)
+    for i in range(W.shape[0]):
+        W_n[:3] += W[i, :3] + skew(points[i] - p_G) @ W[i, 3:]
+        W_n[3:] += W[i, 3:]
     return W_n
 
 
+@kernel
 def nullspace_torque(J_G: Mat, W_n: Vec) -> Vec:
     """Eq (37): τ_n = J_Gᵀ W_n."""
-    return J_G.T @ W_n
+    return np.ascontiguousarray(J_G.T) @ W_n
 
 
+@kernel
 def task_priority_torque(J_R: Mat, F_r: Vec, N_r: Mat, tau_n: Vec) -> Vec:
     """Eq (2): τ = J_Rᵀ F_r + N_rᵀ τ_n."""
-    return J_R.T @ F_r + N_r.T @ tau_n
+    return np.ascontiguousarray(J_R.T) @ F_r + np.ascontiguousarray(N_r.T) @ tau_n

@@ -8,11 +8,13 @@ invalid reaches the command.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lapwrench.config import CameraConfig, InteractionConfig
+from lapwrench.jit import kernel
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec
 
@@ -89,19 +91,74 @@ class ValidInputs:
 
 
 def _vector(x: object, n: int) -> Vec | None:
-    """``x`` as a float vector of length n, or None if it is not one."""
-    if type(x) is np.ndarray and x.dtype == np.float64:
+    """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
         return x if x.shape == (n,) else None
     try:
-        a = np.asarray(x, dtype=float)
+        a = np.ascontiguousarray(x, dtype=np.float64)
     except (TypeError, ValueError):
         return None
     return a if a.shape == (n,) else None
 
 
-def _finite(*arrays: Vec) -> bool:
-    # a sum is NaN/inf iff some element is (or it overflows, which is out of range anyway)
-    return all(math.isfinite(a.sum()) for a in arrays)
+def _fresh(stamp: object, now: float, max_age: float) -> bool:
+    """A real, finite stamp at most ``max_age`` before ``now`` (and not after it by more than that)."""
+    if type(stamp) not in (float, int) and not isinstance(stamp, np.floating | np.integer):
+        return False
+    stamp = float(stamp)  # type: ignore[arg-type]
+    return math.isfinite(stamp) and abs(now - stamp) <= max_age if math.isfinite(now) else False
+
+
+# Status codes of the compiled checks below (0: valid).
+OK, NOT_FINITE, OUT_OF_RANGE, OUTSIDE_LIMITS, TOO_FAST = 0, 1, 2, 3, 4
+
+
+@kernel
+def ft_status(f: Vec, m: Vec, force_range: float, torque_range: float) -> tuple[int, float, float]:
+    """F/T reading: (status, |F|, |M|)."""
+    nf, nm = math.sqrt(f @ f), math.sqrt(m @ m)
+    if not (math.isfinite(nf) and math.isfinite(nm)):
+        return NOT_FINITE, nf, nm
+    return (OUT_OF_RANGE if nf > force_range or nm > torque_range else OK), nf, nm
+
+
+@kernel
+def range_status(v: Vec, lo: float, hi: float) -> int:
+    """Every element finite and inside [lo, hi]."""
+    for x in v:
+        if not math.isfinite(x):
+            return NOT_FINITE
+    for x in v:
+        if x < lo or x > hi:
+            return OUT_OF_RANGE
+    return OK
+
+
+@kernel
+def points_status(pts: Vec, width: float, height: float) -> int:
+    """Image points (n x 2) finite and inside the image."""
+    for i in range(pts.shape[0]):
+        if not (math.isfinite(pts[i, 0]) and math.isfinite(pts[i, 1])):
+            return NOT_FINITE
+    for i in range(pts.shape[0]):
+        if pts[i, 0] < 0.0 or pts[i, 1] < 0.0 or pts[i, 0] > width or pts[i, 1] > height:
+            return OUT_OF_RANGE
+    return OK
+
+
+@kernel
+def joint_status(q: Vec, dq: Vec, lower: Vec, upper: Vec, tolerance: float, dq_max: Vec) -> int:
+    """Joint positions inside the limits (± tolerance) and speeds under ``dq_max``, all finite."""
+    for i in range(q.shape[0]):
+        if not (math.isfinite(q[i]) and math.isfinite(dq[i])):
+            return NOT_FINITE
+    for i in range(q.shape[0]):
+        if q[i] < lower[i] - tolerance or q[i] > upper[i] + tolerance:
+            return OUTSIDE_LIMITS
+    for i in range(q.shape[0]):
+        if abs(dq[i]) > dq_max[i]:
+            return TOO_FAST
+    return OK
 
 
 class InputValidator:
@@ -124,6 +181,11 @@ class InputValidator:
         self.position_tolerance = position_tolerance
         self.velocity_factor = velocity_factor
         self.max_external_force = max_external_force
+        self._q_lo = np.ascontiguousarray(limits.position_lower, dtype=np.float64)
+        self._q_hi = np.ascontiguousarray(limits.position_upper, dtype=np.float64)
+        self._dq_max = np.ascontiguousarray(velocity_factor * limits.velocity, dtype=np.float64)
+        self._force_range = float(interaction.force_range)
+        self._torque_range = float(interaction.torque_range)
 
     def validate(self, frame: SensorFrame) -> ValidInputs:
         out = ValidInputs()
@@ -136,57 +198,73 @@ class InputValidator:
             f, m = _vector(frame.ft.force, 3), _vector(frame.ft.torque, 3)
             if f is None or m is None:
                 reject("ft", "F/T reading must be two 3-vectors")
-            elif not _finite(f, m):
-                reject("ft", "F/T reading is not finite")
-            elif math.sqrt(f @ f) > self.interaction.force_range or math.sqrt(m @ m) > self.interaction.torque_range:
-                reject("ft", f"F/T out of range (|F|={math.sqrt(f @ f):.1f} N, |M|={math.sqrt(m @ m):.2f} N m)")
             else:
-                out.ft = ForceTorqueReading(f, m, frame.ft.stamp)
+                status, nf, nm = ft_status(f, m, self._force_range, self._torque_range)
+                if status == NOT_FINITE:
+                    reject("ft", "F/T reading is not finite")
+                elif status == OUT_OF_RANGE:
+                    reject("ft", f"F/T out of range (|F|={nf:.1f} N, |M|={nm:.2f} N m)")
+                else:
+                    out.ft = ForceTorqueReading(f, m, frame.ft.stamp)
 
         if frame.tactile is not None:
             v = _vector(frame.tactile.values, TACTILE_ELEMENTS)
             if v is None:
                 reject("tactile", f"tactile reading must have {TACTILE_ELEMENTS} elements")
-            elif not _finite(v):
-                reject("tactile", "tactile reading is not finite")
-            elif v.min() < 0.0 or v.max() > TACTILE_MAX:
-                reject("tactile", "tactile element outside [0, 255]")
             else:
-                out.tactile = TactileReading(v, frame.tactile.stamp)
+                status = range_status(v, 0.0, TACTILE_MAX)
+                if status == NOT_FINITE:
+                    reject("tactile", "tactile reading is not finite")
+                elif status == OUT_OF_RANGE:
+                    reject("tactile", "tactile element outside [0, 255]")
+                else:
+                    out.tactile = TactileReading(v, frame.tactile.stamp)
 
         if frame.instruments is not None:
-            raw = frame.instruments.points
-            pts = np.asarray(raw, dtype=float) if np.ndim(raw) == 2 and np.shape(raw)[1:] == (2,) else None
-            cam = self.camera
-            if pts is None:
-                reject("instruments", "image points must be (n, 2)")
-            elif not _finite(pts):
-                reject("instruments", "image point is not finite")
-            elif len(pts) and (pts.min() < 0.0 or pts[:, 0].max() > cam.width or pts[:, 1].max() > cam.height):
-                reject("instruments", f"image point outside the {cam.width}x{cam.height} image")
-            elif not np.isfinite(frame.instruments.stamp) or t - frame.instruments.stamp > self.max_image_age:
-                reject("instruments", f"detection older than {self.max_image_age} s")
-            else:
-                out.instruments = InstrumentObservation(pts, frame.instruments.stamp)
+            out.instruments = self._instruments(frame, reject)
 
         if frame.robot is not None:
             q, dq = _vector(frame.robot.q, 7), _vector(frame.robot.dq, 7)
-            lim = self.limits
-            tol = self.position_tolerance
             if q is None or dq is None:
                 reject("robot", "robot state must hold 7 joint positions and velocities")
-            elif not _finite(q, dq):
+                return out
+            status = joint_status(q, dq, self._q_lo, self._q_hi, self.position_tolerance, self._dq_max)
+            if status == NOT_FINITE:
                 reject("robot", "robot state is not finite")
-            elif (q < lim.position_lower - tol).any() or (q > lim.position_upper + tol).any():
+            elif status == OUTSIDE_LIMITS:
                 reject("robot", "joint position outside the joint limits")
-            elif (np.abs(dq) > self.velocity_factor * lim.velocity).any():
+            elif status == TOO_FAST:
                 reject("robot", "joint velocity beyond the velocity limits")
             else:
                 fext = None
                 if frame.robot.external_force is not None:
                     fext = _vector(frame.robot.external_force, 3)
-                    if fext is None or not _finite(fext) or math.sqrt(fext @ fext) > self.max_external_force:
+                    if fext is None or range_status(fext, -self.max_external_force, self.max_external_force) or (
+                        math.sqrt(fext @ fext) > self.max_external_force
+                    ):
                         reject("external_force", "external force estimate invalid or out of range")
                         fext = None
                 out.robot = RobotReading(q, dq, fext, frame.robot.stamp)
         return out
+
+    def _instruments(self, frame: SensorFrame, reject: Callable[[str, str], None]) -> InstrumentObservation | None:
+        assert frame.instruments is not None
+        raw = frame.instruments.points
+        cam = self.camera
+        try:
+            pts = np.ascontiguousarray(raw, dtype=np.float64)
+        except (TypeError, ValueError):
+            pts = None
+        if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
+            reject("instruments", "image points must be (n, 2)")
+            return None
+        status = points_status(pts, float(cam.width), float(cam.height))
+        if status == NOT_FINITE:
+            reject("instruments", "image point is not finite")
+        elif status == OUT_OF_RANGE:
+            reject("instruments", f"image point outside the {cam.width}x{cam.height} image")
+        elif not _fresh(frame.instruments.stamp, frame.time, self.max_image_age):
+            reject("instruments", f"detection older than {self.max_image_age} s")
+        else:
+            return InstrumentObservation(pts, frame.instruments.stamp)
+        return None

@@ -23,9 +23,12 @@ from __future__ import annotations
 import math
 from typing import Literal
 
+from lapwrench.jit import kernel
+
 RampVariant = Literal["printed", "c1"]
 
 
+@kernel
 def sine_ramp(x: float, lo: float, hi: float, peak: float, variant: RampVariant = "printed") -> float:
     """Dead zone below ``lo``, sine transition on (lo, hi], saturation at ``peak`` above ``hi``."""
     if x <= lo:
@@ -36,4 +39,4 @@ def sine_ramp(x: float, lo: float, hi: float, peak: float, variant: RampVariant 
         return 0.5 * peak * (math.sin((x - lo) * math.pi / (2.0 * (hi - lo))) + 1.0)
     if variant == "c1":
         return 0.5 * peak * (math.sin((x - lo) * math.pi / (hi - lo) - 0.5 * math.pi) + 1.0)
-    raise ValueError(f"unknown ramp variant {variant!r}; choose 'printed' or 'c1'")
+    raise ValueError("unknown ramp variant; choose 'printed' or 'c1'")

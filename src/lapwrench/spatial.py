@@ -12,16 +12,23 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from lapwrench.jit import kernel
+
 Vec = NDArray[np.float64]
 Mat = NDArray[np.float64]
 
 
+@kernel
 def skew(v: Vec) -> Mat:
     """[v]x such that [v]x w = v x w."""
-    x, y, z = v.tolist()
-    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
+    S = np.zeros((3, 3))
+    S[0, 1], S[0, 2] = -v[2], v[1]
+    S[1, 0], S[1, 2] = v[2], -v[0]
+    S[2, 0], S[2, 1] = -v[1], v[0]
+    return S
 
 
+@kernel
 def wrench_transform(p_from: Vec, p_to: Vec) -> Mat:
     """Eq (39): Q moves a wrench taken about ``p_from`` to the equivalent wrench about ``p_to``.
 

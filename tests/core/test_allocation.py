@@ -66,7 +66,7 @@ def test_nullspace_wrench_sums_wrenches_about_the_closest_point() -> None:
     p_G = np.array([0.1, 0.0, 0.2])
     w1 = Wrench(np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.1, 0.0, 0.3]))
     w2 = Wrench(np.array([0.0, 0.0, 0.5]), np.zeros(3), np.zeros(3))
-    W = nullspace_wrench([w1, w2], p_G)
+    W = nullspace_wrench(np.stack([w1.vector, w2.vector]), np.stack([w1.point, w2.point]), p_G)
     np.testing.assert_allclose(W, [0.0, 0.1, 0.5, 1.0, 0.0, 0.0], atol=1e-12)
     J_G = np.arange(42.0).reshape(6, 7)
     np.testing.assert_allclose(nullspace_torque(J_G, W), J_G.T @ W)
@@ -107,7 +107,9 @@ def test_printed_inverse_is_the_printed_formula_when_well_conditioned(panda: Rob
     Minv = np.linalg.inv(kin.M)
     J, _ = _printed_at(kin, offset)
     printed = Minv @ J.T @ np.linalg.inv(J @ Minv @ J.T)
-    np.testing.assert_array_equal(weighted_pseudo_inverse(J, Minv), printed)
+    # the same formula, compiled: equal up to the order of the floating-point operations
+    atol = 1e-9 * np.abs(printed).max()
+    np.testing.assert_allclose(weighted_pseudo_inverse(J, Minv), printed, rtol=1e-9, atol=atol)
 
 
 def test_regularised_inverse_is_continuous_and_zero_on_the_null_space() -> None:

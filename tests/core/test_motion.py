@@ -56,12 +56,17 @@ def test_shaper_passes_feasible_requests_unchanged() -> None:
 def _damped_step_matrices(ctrl: Controller):
     """Velocity-update matrices of the damping terms alone, explicit and semi-implicit."""
     kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
-    geo = ctrl._geometry(kin)
     from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
+    from lapwrench.motion.virtual_model import damping_jacobian
+    from lapwrench.rcm.geometry import closest_point, closest_point_jacobian, lateral_rcm_jacobian
 
+    assert ctrl.rcm is not None
+    J_R = lateral_rcm_jacobian(kin, ctrl.rcm.p_R)
+    J_G = closest_point_jacobian(kin, closest_point(kin, 0.8, ctrl.cfg.scope.length)[1])
     Minv = np.linalg.inv(kin.M)
-    N_r = nullspace_projector(geo.J_R, weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z))
-    B = ctrl._damping(geo, N_r) + self_motion_damping(kin, self_motion_projector(kin, Minv), 10.0)
+    N_r = nullspace_projector(J_R, weighted_pseudo_inverse(J_R, Minv, kin.d_z))
+    B_s = self_motion_damping(kin, self_motion_projector(kin, Minv), 10.0)
+    B = damping_jacobian(J_R, ctrl.cfg.rcm.Kd, N_r, J_G, ctrl.params.D_unguided, B_s)
     dt = ctrl.dt
     explicit = np.eye(7) - dt * Minv @ B
     implicit = np.linalg.solve(kin.M + dt * B, kin.M)

@@ -119,16 +119,14 @@ def test_the_controller_stops_when_the_rcm_task_cannot_be_kept() -> None:
     cfg = load()
     ctrl = Controller(cfg)
     ctrl.reset(DEFAULT_Q0)
-    real_bounds = ctrl.shaper.acceleration_bounds
 
-    def frozen(state: ReferenceState) -> tuple[np.ndarray, np.ndarray]:
-        lo, hi = real_bounds(state)
+    def frozen(state: ReferenceState, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = lo.copy(), hi.copy()
         forced = np.clip(0.5, lo[1:], hi[1:])  # inside the real bounds
         lo[1:], hi[1:] = forced, forced
         return lo, hi
 
-    ctrl.shaper.acceleration_bounds = frozen  # type: ignore[method-assign]
+    ctrl.bounds_hook = frozen
     from lapwrench.virtual import HandScript, run_virtual
 
     _, log = run_virtual(

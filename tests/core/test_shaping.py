@@ -5,12 +5,13 @@ from __future__ import annotations
 import itertools
 import math
 
+import numpy as np
 import pytest
 
 from lapwrench.config import load
 from lapwrench.rcm.adaptive import dead_zone_saturation
 from lapwrench.shaping import sine_ramp
-from lapwrench.wrenches.tracking import tracking_force_magnitude
+from lapwrench.wrenches.tracking import TrackingParams, tracking_force_magnitude
 
 LO, HI, PEAK = 50.0, 200.0, 10.0
 
@@ -50,10 +51,12 @@ def test_unknown_variant_is_rejected() -> None:
 
 def test_eq10_and_eq21_use_their_own_parameters() -> None:
     cfg = load()
-    assert tracking_force_magnitude(50.0, cfg.tracking) == 0.0
-    assert tracking_force_magnitude(201.0, cfg.tracking) == 10.0
-    c1 = cfg.replace(tracking={"ramp": "c1"}).tracking
+    tracking = TrackingParams.from_config(cfg.camera, cfg.tracking)
+    assert tracking_force_magnitude(50.0, tracking) == 0.0
+    assert tracking_force_magnitude(201.0, tracking) == 10.0
+    c1 = TrackingParams.from_config(cfg.camera, cfg.replace(tracking={"ramp": "c1"}).tracking)
     assert tracking_force_magnitude(50.001, c1) < 1e-3
-    F = dead_zone_saturation([-20.0, 4.0, 10.0], cfg.adaptive_rcm)
+    a = cfg.adaptive_rcm
+    F = dead_zone_saturation(np.array([-20.0, 4.0, 10.0]), a.gamma1, a.gamma2, a.F_op, a.ramp)
     assert F[0] == -10.0 and F[1] == 0.0
     assert F[2] == pytest.approx(5.0 * (math.sin(math.pi / 4) + 1))

@@ -8,6 +8,7 @@ import pytest
 
 from lapwrench.config import load
 from lapwrench.wrenches.tracking import (
+    TrackingParams,
     pixel_distance,
     tracking_direction,
     unit_depth_ray,
@@ -16,6 +17,7 @@ from lapwrench.wrenches.tracking import (
 
 CFG = load()
 CAM = CFG.camera
+PARAMS = TrackingParams.from_config(CAM, CFG.tracking)
 
 
 @pytest.mark.parametrize("seed", range(10))
@@ -23,7 +25,7 @@ def test_direction_is_perpendicular_to_the_ray(seed: int) -> None:
     rng = np.random.default_rng(seed)
     R_C = pin.exp3(rng.uniform(-3, 3, 3))
     u, v = rng.uniform(0, 640), rng.uniform(0, 480)
-    ray = unit_depth_ray(u, v, CAM, R_C)
+    ray = unit_depth_ray(u, v, PARAMS, R_C)
     V = tracking_direction(ray, R_C[:, 2])
     assert np.linalg.norm(V) == pytest.approx(1.0)
     assert abs(V @ ray) < 1e-12
@@ -34,7 +36,7 @@ def test_direction_is_perpendicular_to_the_ray(seed: int) -> None:
 
 def test_image_plane_variant_has_no_axial_component() -> None:
     R_C = np.eye(3)
-    V = tracking_direction(unit_depth_ray(500.0, 100.0, CAM, R_C), R_C[:, 2], "image_plane")
+    V = tracking_direction(unit_depth_ray(500.0, 100.0, PARAMS, R_C), R_C[:, 2], "image_plane")
     assert V[2] == 0.0 and np.linalg.norm(V) == pytest.approx(1.0)
 
 
@@ -48,18 +50,18 @@ def test_pixel_distance_eq9() -> None:
 
 def test_virtual_force_is_zero_without_instruments_or_inside_the_dead_zone() -> None:
     R_C = np.eye(3)
-    assert not np.any(virtual_force(np.zeros((0, 2)), CAM, CFG.tracking, R_C))
+    assert not np.any(virtual_force(np.zeros((0, 2)), PARAMS, R_C))
     inside = np.array([[CAM.u0 + 30.0, CAM.v0 + 30.0]])
-    assert not np.any(virtual_force(inside, CAM, CFG.tracking, R_C))
+    assert not np.any(virtual_force(inside, PARAMS, R_C))
 
 
 def test_virtual_force_sums_instruments_and_saturates() -> None:
     R_C = np.eye(3)
     far_right = np.array([[CAM.u0 + 300.0, CAM.v0]])
     far_left = np.array([[CAM.u0 - 300.0, CAM.v0]])
-    F_r = virtual_force(far_right, CAM, CFG.tracking, R_C)
+    F_r = virtual_force(far_right, PARAMS, R_C)
     assert np.linalg.norm(F_r) == pytest.approx(CFG.tracking.F_max)
     printed = CFG.replace(tracking={"direction": "printed"}).tracking
-    both = virtual_force(np.vstack([far_right, far_left]), CAM, printed, R_C)
+    both = virtual_force(np.vstack([far_right, far_left]), TrackingParams.from_config(CAM, printed), R_C)
     assert abs(both[0]) < 1e-9  # lateral parts cancel, the printed retraction parts add
     assert both[2] < 0

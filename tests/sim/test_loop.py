@@ -88,18 +88,17 @@ def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_superviso
     loop = ClosedLoop(load())
     sent = recording(loop)
     ctrl = loop.controller
-    real_bounds = ctrl.shaper.acceleration_bounds
     _, d = loop.world.shaft_axis()
     push = np.cross(d, [0.0, 0.0, 1.0])
     push = 20.0 * push / np.linalg.norm(push)
 
-    def frozen(state):  # type: ignore[no-untyped-def]
-        lo, hi = (b.copy() for b in real_bounds(state))
+    def frozen(state, lo, hi):  # type: ignore[no-untyped-def]
+        lo, hi = lo.copy(), hi.copy()
         if loop.t > 0.2:  # from 0.2 s on, only joint 1 may change its acceleration toward zero
             lo[1:] = hi[1:] = np.clip(0.0, lo[1:], hi[1:])
         return lo, hi
 
-    ctrl.shaper.acceleration_bounds = frozen  # type: ignore[method-assign]
+    ctrl.bounds_hook = frozen
     with pytest.raises(SafetyStopError) as stop:
         for _ in range(3000):
             loop.world.set_hand_wrench(np.r_[push, 0.0, 0.0, 0.0])

@@ -16,10 +16,12 @@ joint limits and go through :func:`lapwrench.motion.saturation.saturate_in_null_
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from lapwrench.config import EnvelopeConfig
+from lapwrench.jit import kernel
 from lapwrench.motion.saturation import LimitRows
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec
@@ -30,8 +32,32 @@ APPROACH_TIME = 0.01
 # the scope past a reference that brakes at the wall (0.32 mm measured in the MuJoCo world with the
 # Franka's joint impedance at 10 and 30 N axial pushes, whatever the measured-feedback time).
 DEPTH_WALL_MARGIN = 0.0005
+# Names of the walls a row can stand for (telemetry); :func:`envelope_rows` returns their indices.
+WALL_NAMES = ("insertion_speed", "depth_min", "depth_max", "pivot_speed", "roll_range", "roll_speed")
 
 
+class EnvelopeParams(NamedTuple):
+    """The envelope configuration as one tuple of scalars for the compiled maths."""
+
+    pivot_speed_max: float
+    pivot_deceleration: float
+    insertion_speed_max: float
+    insertion_deceleration: float
+    depth_min: float
+    depth_max: float
+    roll_range: float
+    roll_speed_max: float
+
+    @staticmethod
+    def from_config(c: EnvelopeConfig) -> EnvelopeParams:
+        return EnvelopeParams(
+            float(c.pivot_speed_max), float(c.pivot_deceleration), float(c.insertion_speed_max),
+            float(c.insertion_deceleration), float(c.depth_min), float(c.depth_max), float(c.roll_range),
+            float(c.roll_speed_max),
+        )
+
+
+@kernel
 def wall_speed(room: float, deceleration: float, speed_max: float) -> float:
     """Largest speed toward a wall ``room`` away: sqrt(2 a room), from which ``deceleration`` stops
     at the wall, and at most ``speed_max``.
@@ -42,15 +68,17 @@ def wall_speed(room: float, deceleration: float, speed_max: float) -> float:
     return min(speed_max, max(-speed_max, v))
 
 
-def _wall_name(v_lo: float, v_hi: float, speed_max: float, lo_name: str, hi_name: str, speed_name: str) -> str:
+@kernel
+def _wall_code(v_lo: float, v_hi: float, speed_max: float, lo_code: int, hi_code: int, speed_code: int) -> int:
     """Which wall a rate row stands for: a position wall when it is nearer than the speed limit."""
     if v_hi < speed_max:
-        return hi_name
+        return hi_code
     if v_lo < speed_max:
-        return lo_name
-    return speed_name
+        return lo_code
+    return speed_code
 
 
+@kernel
 def rate_row_bounds(y: float, y_lo: float, y_hi: float, deceleration: float, dt: float) -> tuple[float, float]:
     """Bounds on cᵀ a that bring the rate y toward [y_lo, y_hi] no faster than ``APPROACH_TIME``.
 
@@ -64,38 +92,85 @@ def rate_row_bounds(y: float, y_lo: float, y_hi: float, deceleration: float, dt:
     return lo, max(lo, hi)
 
 
-def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _dot(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def insertion_rate_weights(d: tuple[float, float, float], r: tuple[float, float, float]) -> list[float]:
+@kernel
+def insertion_rate_weights(d: Vec, r: Vec) -> Vec:
     """Weights w of the twist [ω; v] of {E} with depth rate = wᵀ [ω; v] (so the row is wᵀ J_E):
 
         d/dt [L - d_zᵀ (p_R - p_E)] = d_zᵀ v_E - (d_z × r)ᵀ ω_E,   r = p_R - p_E.
 
     (The motion of the adaptive point p_R is left out: it is slow and not the arm's doing.)
     """
-    k = _cross(d, r)
-    return [-k[0], -k[1], -k[2], d[0], d[1], d[2]]
+    w = np.empty(6)
+    w[:3] = -np.cross(d, r)
+    w[3:] = d
+    return w
 
 
+@kernel
 def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     """Rotation (rad) of {E} about its shaft axis since ``R_E0`` (the twist of a swing-twist split).
 
     The start frame's x axis is carried by the shortest rotation taking the start axis d_0 to the
     current d_z; the roll is the angle from that axis to the current x axis, about d_z.
     """
-    (x0, _, d0), (x, _, d) = (tuple(c) for c in R_E0.T.tolist()), (tuple(c) for c in R_E.T.tolist())
-    k = _cross(d0, d)
-    kx0 = _cross(k, x0)
-    kkx0 = _cross(k, kx0)
-    c = 1.0 + _dot(d0, d)
-    x0s = (x0[0] + kx0[0] + kkx0[0] / c, x0[1] + kx0[1] + kkx0[1] / c, x0[2] + kx0[2] + kkx0[2] / c)
-    return math.atan2(_dot(_cross(x0s, x), d), _dot(x0s, x))
+    x0, d0 = np.ascontiguousarray(R_E0[:, 0]), np.ascontiguousarray(R_E0[:, 2])
+    x, d = np.ascontiguousarray(R_E[:, 0]), np.ascontiguousarray(R_E[:, 2])
+    k = np.cross(d0, d)
+    kx0 = np.cross(k, x0)
+    x0s = x0 + kx0 + np.cross(k, kx0) / (1.0 + d0 @ d)
+    return math.atan2(np.cross(x0s, x) @ d, x0s @ x)
+
+
+@kernel
+def envelope_rows(
+    kin: Kinematics, p_R: Vec, a_d: Vec, depth_offset: float, R_E0: Mat, p: EnvelopeParams, length: float, dt: float
+) -> tuple[Mat, Vec, Vec, Vec, np.ndarray]:
+    """The envelope's four rows lo <= W ẋ <= hi on the twist acceleration ẋ of {E} (module docstring).
+
+    Rows: insertion (depth walls and speed), the pivot speed along and across the current pivot
+    direction, the roll (range and speed). ``a_d`` (the desired joint acceleration) orients the
+    pivot rows when the scope is at rest; ``depth_offset`` (m) is what the measured pose adds.
+    Returns (W, lo, hi, scale, wall): ``wall`` indexes :data:`WALL_NAMES`.
+    """
+    d = kin.d_z
+    r = p_R - kin.p_E
+    twist = kin.J_E @ kin.dq
+    # pivot: |ω⊥| bounded along its current direction u1 and across it (u2), so the polygon
+    # re-aligned every tick keeps the norm at the limit; from rest, along the desired motion
+    w = twist[:3].copy()
+    wd = w @ d
+    if w @ w - wd * wd < 1e-12:
+        w = kin.J_E[:3] @ (kin.dq + dt * a_d)
+        wd = w @ d
+    u = w - wd * d
+    n = math.sqrt(u @ u)
+    u1 = u / n if n > 1e-9 else np.ascontiguousarray(kin.R_E[:, 0])
+    u2 = np.cross(d, u1)
+    W = np.zeros((4, 6))
+    W[0] = insertion_rate_weights(d, r)
+    W[1, :3] = u1
+    W[2, :3] = u2
+    W[3, :3] = d
+    y = W @ twist
+    # position walls: the room left once the rate has followed its bound (it lags by T)
+    T = max(APPROACH_TIME, dt)
+    depth = length - d @ r + depth_offset
+    v_max, a_in = p.insertion_speed_max, p.insertion_deceleration
+    v_in = wall_speed(p.depth_max - DEPTH_WALL_MARGIN - depth - max(y[0], 0.0) * T, a_in, v_max)
+    v_out = wall_speed(depth - p.depth_min - DEPTH_WALL_MARGIN + min(y[0], 0.0) * T, a_in, v_max)
+    roll = roll_angle(kin.R_E, R_E0)
+    r_max, a_w = p.roll_speed_max, p.pivot_deceleration
+    w_pos = wall_speed(p.roll_range - roll - max(y[3], 0.0) * T, a_w, r_max)
+    w_neg = wall_speed(roll + p.roll_range + min(y[3], 0.0) * T, a_w, r_max)
+    p_max = p.pivot_speed_max
+    lo, hi = np.empty(4), np.empty(4)
+    lo[0], hi[0] = rate_row_bounds(y[0], -v_out, v_in, a_in, dt)
+    lo[1], hi[1] = rate_row_bounds(y[1], -p_max, p_max, a_w, dt)
+    lo[2], hi[2] = rate_row_bounds(y[2], -p_max, p_max, a_w, dt)
+    lo[3], hi[3] = rate_row_bounds(y[3], -w_neg, w_pos, a_w, dt)
+    scale = np.array((a_in, a_w, a_w, a_w))
+    wall = np.array((_wall_code(v_out, v_in, v_max, 1, 2, 0), 3, 3, _wall_code(w_neg, w_pos, r_max, 4, 4, 5)))
+    return W, lo, hi, scale, wall
 
 
 class Envelope:
@@ -103,6 +178,7 @@ class Envelope:
 
     def __init__(self, cfg: EnvelopeConfig, length: float, dt: float) -> None:
         self.cfg = cfg
+        self.params = EnvelopeParams.from_config(cfg)
         self.length = length
         self.dt = dt
         self.R_E0: Mat | None = None
@@ -113,56 +189,13 @@ class Envelope:
 
     def rows(self, kin: Kinematics, p_R: Vec, a_d: Vec, depth_offset: float = 0.0) -> LimitRows | None:
         """The envelope's rows at this tick, on the *twist* acceleration of {E} (map them to the joints
-        with :meth:`LimitRows.through` ``(kin.J_E)``). ``a_d`` (the desired acceleration) orients the
-        pivot rows when the scope is at rest; ``depth_offset`` (m) is what the measured pose adds."""
-        cfg, dt = self.cfg, self.dt
-        if not cfg.enabled or self.R_E0 is None:
+        with :meth:`LimitRows.through` ``(kin.J_E)``); None when the envelope is off (see :func:`envelope_rows`)."""
+        if not self.cfg.enabled or self.R_E0 is None:
             return None
-        d = tuple(kin.d_z.tolist())
-        r = tuple((p_R - kin.p_E).tolist())
-        twist_v = kin.J_E @ kin.dq
-        twist = twist_v.tolist()
-        # pivot: |ω⊥| bounded along its current direction u1 and across it (u2), so the polygon
-        # re-aligned every tick keeps the norm at the limit; from rest, along the desired motion
-        w = (twist[0], twist[1], twist[2])
-        if _perp_norm2(w, d) < 1e-12:
-            w = tuple((kin.J_E[:3] @ (kin.dq + dt * a_d)).tolist())
-        wd = _dot(w, d)
-        u = (w[0] - wd * d[0], w[1] - wd * d[1], w[2] - wd * d[2])
-        n = math.sqrt(_dot(u, u))
-        u1 = (u[0] / n, u[1] / n, u[2] / n) if n > 1e-9 else tuple(kin.R_E[:, 0].tolist())
-        u2 = _cross(d, u1)
-        W = np.array(
-            (insertion_rate_weights(d, r), (*u1, 0.0, 0.0, 0.0), (*u2, 0.0, 0.0, 0.0), (*d, 0.0, 0.0, 0.0))
+        W, lo, hi, scale, wall = envelope_rows(
+            kin, p_R, a_d, depth_offset, self.R_E0, self.params, self.length, self.dt
         )
-        y = (W @ twist_v).tolist()
-        # position walls: the room left once the rate has followed its bound (it lags by T)
-        T = max(APPROACH_TIME, dt)
-        depth = self.length - _dot(d, r) + depth_offset
-        v_max, a_in = cfg.insertion_speed_max, cfg.insertion_deceleration
-        v_in = wall_speed(cfg.depth_max - DEPTH_WALL_MARGIN - depth - max(y[0], 0.0) * T, a_in, v_max)
-        v_out = wall_speed(depth - cfg.depth_min - DEPTH_WALL_MARGIN + min(y[0], 0.0) * T, a_in, v_max)
-        roll = roll_angle(kin.R_E, self.R_E0)
-        r_max, a_w = cfg.roll_speed_max, cfg.pivot_deceleration
-        w_pos = wall_speed(cfg.roll_range - roll - max(y[3], 0.0) * T, a_w, r_max)
-        w_neg = wall_speed(roll + cfg.roll_range + min(y[3], 0.0) * T, a_w, r_max)
-        p_max = cfg.pivot_speed_max
-        limits = ((-v_out, v_in, a_in), (-p_max, p_max, a_w), (-p_max, p_max, a_w), (-w_neg, w_pos, a_w))
-        bounds = [rate_row_bounds(y_k, *lim, dt) for y_k, lim in zip(y, limits, strict=True)]
-        names = (
-            _wall_name(v_out, v_in, v_max, "depth_min", "depth_max", "insertion_speed"),
-            "pivot_speed",
-            "pivot_speed",
-            _wall_name(w_neg, w_pos, r_max, "roll_range", "roll_range", "roll_speed"),
-        )
-        lo, hi = np.array(bounds).T
-        return LimitRows(W, lo, hi, np.array((a_in, a_w, a_w, a_w)), names, _SOFT)
-
-
-def _perp_norm2(w: tuple[float, float, float], d: tuple[float, float, float]) -> float:
-    """|P w|² for the projector P orthogonal to d."""
-    wd = _dot(w, d)
-    return _dot(w, w) - wd * wd
+        return LimitRows(W, lo, hi, scale, tuple(WALL_NAMES[i] for i in wall), _SOFT)
 
 
 _SOFT = np.zeros(4, dtype=bool)

@@ -18,11 +18,39 @@ import math
 
 import numpy as np
 
+from lapwrench.jit import kernel
 from lapwrench.rcm.geometry import insertion_depth, rcm_error
-from lapwrench.robot.model import Kinematics, RobotModel
+from lapwrench.robot.model import Kinematics, RobotModel, ScopeAxis
 from lapwrench.spatial import Vec
 
 FEEDBACK_TIME = 0.01  # s, time constant of the low-pass on the measured-minus-reference offsets
+NO_AXIS = ScopeAxis(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.diag([1.0, 1.0, 0.0]))  # "no measurement"
+
+
+@kernel
+def feedback_step(
+    offsets: Vec, measured: ScopeAxis, has_measured: bool, kin: Kinematics, p_R: Vec, e_R: Vec,
+    length: float, gain: float, cap: float,
+) -> None:
+    """One low-pass step of ``offsets`` = [e_offset (3); depth_offset] in place (module docstring).
+
+    ``measured`` is the scope axis at the measured joints; without one (``has_measured`` False) or
+    with a non-finite one the targets are zero and the offsets decay.
+    """
+    e_target = np.zeros(3)
+    d_target = 0.0
+    if has_measured:
+        e_t = rcm_error(measured, p_R) - e_R
+        d_t = insertion_depth(measured, p_R, length) - insertion_depth(kin, p_R, length)
+        if np.isfinite(e_t).all() and math.isfinite(d_t):
+            e_target, d_target = e_t, d_t
+    e = offsets[:3] + gain * (e_target - offsets[:3])
+    n = math.sqrt(e @ e)
+    if n > cap:
+        e = e * (cap / n)
+    offsets[:3] = e
+    d = offsets[3] + gain * (d_target - offsets[3])
+    offsets[3] = min(cap, max(-cap, d))
 
 
 class MeasuredFeedback:
@@ -33,26 +61,26 @@ class MeasuredFeedback:
         self.length = length
         self.gain = dt / max(FEEDBACK_TIME, dt)
         self.cap = cap
-        self.e_offset = np.zeros(3)
-        self.depth_offset = 0.0
+        self.offsets = np.zeros(4)
+
+    @property
+    def e_offset(self) -> Vec:
+        return self.offsets[:3]
+
+    @property
+    def depth_offset(self) -> float:
+        return float(self.offsets[3])
 
     def reset(self) -> None:
-        self.e_offset = np.zeros(3)
-        self.depth_offset = 0.0
+        self.offsets[:] = 0.0
+
+    def measured_axis(self, q_measured: Vec | None) -> tuple[ScopeAxis, bool]:
+        """The scope axis at the measured joints (Pinocchio), or a placeholder and False when there is none."""
+        if q_measured is None:
+            return NO_AXIS, False
+        return self.model.scope_axis_at(q_measured), True
 
     def update(self, q_measured: Vec | None, kin: Kinematics, p_R: Vec, e_R: Vec) -> None:
         """One filter step; ``None`` (no valid measurement) lets the offsets decay to zero."""
-        if q_measured is None:
-            e_target, d_target = np.zeros(3), 0.0
-        else:
-            axis = self.model.scope_axis_at(q_measured)
-            e_target = rcm_error(axis, p_R) - e_R  # type: ignore[arg-type]
-            d_target = insertion_depth(axis, p_R, self.length) - insertion_depth(kin, p_R, self.length)  # type: ignore[arg-type]
-            if not (np.isfinite(e_target).all() and math.isfinite(d_target)):
-                e_target, d_target = np.zeros(3), 0.0
-        self.e_offset = self.e_offset + self.gain * (e_target - self.e_offset)
-        n = math.sqrt(float(self.e_offset @ self.e_offset))
-        if n > self.cap:
-            self.e_offset *= self.cap / n
-        d = self.depth_offset + self.gain * (d_target - self.depth_offset)
-        self.depth_offset = min(self.cap, max(-self.cap, d))
+        axis, has = self.measured_axis(q_measured)
+        feedback_step(self.offsets, axis, has, kin, p_R, e_R, self.length, self.gain, self.cap)

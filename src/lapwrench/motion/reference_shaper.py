@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lapwrench.jit import kernel
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec
 
@@ -31,45 +32,70 @@ class ReferenceState:
     ddq: Vec
 
 
+@kernel
+def braking_speeds(q: Vec, q_lo: Vec, q_hi: Vec, v_max: Vec, two_a_brake: Vec) -> tuple[Vec, Vec]:
+    """Largest speeds at q toward the lower and toward the upper limit: the velocity limit, and the
+    speed from which braking at a_brake stops the joint at its margin, v² = 2 a_brake room."""
+    down = np.minimum(v_max, np.sqrt(two_a_brake * np.maximum(q - q_lo, 0.0)))
+    up = np.minimum(v_max, np.sqrt(two_a_brake * np.maximum(q_hi - q, 0.0)))
+    return down, up
+
+
+@kernel
+def reachable_acceleration(headroom: Vec, j_max: Vec, dt: float) -> Vec:
+    """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
+    jerk-limited ramp of the acceleration back to zero. Negative headroom brakes at once."""
+    a = j_max * (np.sqrt(dt * dt + 2.0 / j_max * np.maximum(headroom, 0.0)) - dt)
+    return np.where(headroom >= 0.0, a, headroom / dt)
+
+
+@kernel
+def acceleration_bounds(
+    q: Vec, dq: Vec, ddq: Vec, q_lo: Vec, q_hi: Vec, v_max: Vec, a_max: Vec, j_max: Vec, dt: float
+) -> tuple[Vec, Vec]:
+    """Per-joint interval [a_lo, a_hi] of next accelerations that respects every joint limit.
+
+    Precedence jerk > acceleration > velocity/position when the bands do not intersect, so the
+    interval is never empty. The saturation step (:mod:`lapwrench.motion.saturation`) chooses an
+    acceleration inside it that keeps the RCM task.
+    """
+    down, up = braking_speeds(q + dq * dt, q_lo, q_hi, v_max, a_max)  # braking at half a_max
+    a_lo = -reachable_acceleration(down + dq, j_max, dt)
+    a_hi = reachable_acceleration(up - dq, j_max, dt)
+    jerk_step = j_max * dt
+    a_lo = np.minimum(np.maximum(np.minimum(np.maximum(a_lo, -a_max), a_max), ddq - jerk_step), ddq + jerk_step)
+    a_hi = np.minimum(np.maximum(np.minimum(np.maximum(a_hi, -a_max), a_max), ddq - jerk_step), ddq + jerk_step)
+    return a_lo, np.maximum(a_hi, a_lo)
+
+
+@kernel
+def advance_reference(
+    q: Vec, dq: Vec, a: Vec, a_lo: Vec, a_hi: Vec, dt: float
+) -> tuple[Vec, Vec, Vec, bool]:
+    """The next reference (q⁺, q̇⁺, q̈⁺) with acceleration ``a`` clipped into [a_lo, a_hi], and whether
+    the clip changed ``a`` by more than round-off. A non-finite ``a`` brakes instead."""
+    if not np.isfinite(a).all():
+        a = -dq / dt  # never propagate a NaN: brake instead
+    a_clip = np.minimum(np.maximum(a, a_lo), a_hi)
+    clamped = np.max(np.abs(a_clip - a)) > 1e-9 * (1.0 + np.max(np.abs(a)))
+    dq_next = dq + a_clip * dt
+    return q + dq_next * dt, dq_next, a_clip, clamped
+
+
 class ReferenceShaper:
     def __init__(self, limits: JointLimits, dt: float, limit_fraction: float, position_margin: float) -> None:
         self.lim = limits.scaled(limit_fraction)
         self.dt = dt
         self.q_lo = limits.position_lower + position_margin
         self.q_hi = limits.position_upper - position_margin
-        self.two_a_brake = self.lim.acceleration  # braking at half the acceleration limit
-        self.jerk_step = self.lim.jerk * dt
-        self.two_over_jerk = 2.0 / self.lim.jerk
-        self._toward = np.array([[1.0], [-1.0]])  # +dq eats the lower room, -dq the upper one
         self.clamped_ticks = 0
 
-    def _braking_speeds(self, q: Vec) -> Vec:
-        """Largest speeds (2 x n: toward the lower, toward the upper limit) at q: the velocity limit,
-        and the speed from which braking at a_brake stops the joint at its margin, v² = 2 a_brake room."""
-        room = np.maximum(np.stack((q - self.q_lo, self.q_hi - q)), 0.0)
-        return np.minimum(self.lim.velocity, np.sqrt(self.two_a_brake * room))
-
-    def _reachable_acceleration(self, headroom: Vec) -> Vec:
-        """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
-        jerk-limited ramp of the acceleration back to zero. Negative headroom brakes at once."""
-        dt, j = self.dt, self.lim.jerk
-        a = j * (np.sqrt(dt * dt + self.two_over_jerk * np.maximum(headroom, 0.0)) - dt)
-        return np.where(headroom >= 0.0, a, headroom / dt)
-
     def acceleration_bounds(self, state: ReferenceState) -> tuple[Vec, Vec]:
-        """Per-joint interval [a_lo, a_hi] of next accelerations that respects every joint limit.
-
-        Precedence jerk > acceleration > velocity/position when the bands do not intersect, so the
-        interval is never empty. The saturation step (:mod:`lapwrench.motion.saturation`) chooses an
-        acceleration inside it that keeps the RCM task.
-        """
-        # rows: [lower bound, upper bound] of the acceleration
-        headroom = self._braking_speeds(state.q + state.dq * self.dt) + self._toward * state.dq
-        bounds = self._toward * -self._reachable_acceleration(headroom)
-        a_max = self.lim.acceleration
-        bounds = np.minimum(np.maximum(bounds, -a_max), a_max)
-        bounds = np.minimum(np.maximum(bounds, state.ddq - self.jerk_step), state.ddq + self.jerk_step)
-        return bounds[0], np.maximum(bounds[1], bounds[0])
+        """Per-joint interval [a_lo, a_hi] of next accelerations (:func:`acceleration_bounds`)."""
+        lim = self.lim
+        return acceleration_bounds(
+            state.q, state.dq, state.ddq, self.q_lo, self.q_hi, lim.velocity, lim.acceleration, lim.jerk, self.dt
+        )
 
     def advance(self, state: ReferenceState, a: Vec, bounds: tuple[Vec, Vec] | None = None) -> ReferenceState:
         """The next reference with acceleration ``a``, clipped into ``bounds`` (default: computed).
@@ -78,13 +104,9 @@ class ReferenceShaper:
         it changed ``a`` by more than round-off (never, when the saturation step found a solution).
         """
         a_lo, a_hi = self.acceleration_bounds(state) if bounds is None else bounds
-        if not np.isfinite(a).all():
-            a = -state.dq / self.dt  # never propagate a NaN: brake instead
-        a_clip = np.minimum(np.maximum(a, a_lo), a_hi)
-        if np.max(np.abs(a_clip - a)) > 1e-9 * (1.0 + np.max(np.abs(a))):
-            self.clamped_ticks += 1
-        dq = state.dq + a_clip * self.dt
-        return ReferenceState(state.q + dq * self.dt, dq, a_clip)
+        q, dq, ddq, clamped = advance_reference(state.q, state.dq, np.asarray(a, dtype=float), a_lo, a_hi, self.dt)
+        self.clamped_ticks += bool(clamped)
+        return ReferenceState(q, dq, ddq)
 
     def step(self, state: ReferenceState, dq_desired: Vec) -> ReferenceState:
         """The next reference (q⁺, q̇⁺, q̈⁺) closest to ``dq_desired`` with each joint clamped on its own.

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import quadprog
 
+from lapwrench.jit import kernel
 from lapwrench.spatial import Mat, Vec
 
 # A row is active when its violation by a_d exceeds this fraction of its scale (round-off guard),
@@ -114,17 +115,41 @@ class SaturationResult:
 
 def _violations(rows: LimitRows, a: Vec) -> Vec:
     """Each row's violation, normalised by its scale (<= 0: satisfied)."""
-    y = rows.C @ a
-    return np.maximum(rows.lo - y, y - rows.hi) / rows.scale
+    return row_violations(rows.C, rows.lo, rows.hi, rows.scale, np.ascontiguousarray(a, dtype=np.float64))
+
+
+@kernel
+def row_violations(C: Mat, lo: Vec, hi: Vec, scale: Vec, a: Vec) -> Vec:
+    """Each row's violation max(lo - C a, C a - hi), normalised by its scale (<= 0: satisfied)."""
+    y = C @ a
+    return np.maximum(lo - y, y - hi) / scale
+
+
+@kernel
+def exact_qp(a_d: Vec, M: Mat, J: Mat, C: Mat, lo: Vec, hi: Vec, scale: Vec) -> tuple[Mat, Vec, Mat, Vec]:
+    """quadprog's (G, a, C, b) for min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d (first rows) and
+    lo <= C a <= hi, every row widened by BOX_WIDENING of its scale."""
+    k, m, n = J.shape[0], C.shape[0], a_d.shape[0]
+    A = np.empty((n, k + 2 * m))
+    A[:, :k] = J.T
+    A[:, k:k + m] = C.T
+    A[:, k + m:] = -C.T
+    widen = BOX_WIDENING * scale
+    b = np.empty(k + 2 * m)
+    b[:k] = J @ a_d
+    b[k:k + m] = lo - widen
+    b[k + m:] = -hi - widen
+    return M.copy(), M @ a_d, A, b
 
 
 def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
     """min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d and every row; None if infeasible."""
-    widen = BOX_WIDENING * rows.scale
-    A = np.vstack([J, rows.C, -rows.C]).T
-    b = np.concatenate([J @ a_d, rows.lo - widen, -rows.hi - widen])
+    f = np.ascontiguousarray
+    G, a, A, b = exact_qp(f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64),
+                          f(rows.C, dtype=np.float64), f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64),
+                          f(rows.scale, dtype=np.float64))
     try:
-        return quadprog.solve_qp(M, M @ a_d, A, b, J.shape[0])[0]
+        return quadprog.solve_qp(G, a, A, b, J.shape[0])[0]
     except ValueError:  # "constraints are inconsistent" or linearly dependent
         return None
 
@@ -174,10 +199,16 @@ def _closest_task(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec:
 
 def _saturated(rows: LimitRows, a: Vec) -> tuple[str, ...]:
     """Names of the rows at (or beyond) one of their bounds."""
-    y = rows.C @ a
-    tol = 2.0 * BOX_WIDENING * rows.scale + 1e-12
-    at = (y >= rows.hi - tol) | (y <= rows.lo + tol)
-    return tuple(n for n, hit in zip(rows.names, at, strict=True) if hit)
+    at = at_bound(rows.C, rows.lo, rows.hi, rows.scale, np.ascontiguousarray(a, dtype=np.float64))
+    return tuple(rows.names[i] for i in np.flatnonzero(at))
+
+
+@kernel
+def at_bound(C: Mat, lo: Vec, hi: Vec, scale: Vec, a: Vec) -> np.ndarray:
+    """Which rows lie at (or beyond) one of their bounds, within twice the widening."""
+    y = C @ a
+    tol = 2.0 * BOX_WIDENING * scale + 1e-12
+    return (y >= hi - tol) | (y <= lo + tol)
 
 
 def saturate(a_d: Vec, J: Mat, M: Mat, rows: LimitRows) -> SaturationResult:

@@ -21,10 +21,12 @@ from typing import Literal
 
 import numpy as np
 
+from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec
 
 
+@kernel
 def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     """N_Eᵀ = I - J_Eᵀ Λ_E J_E M⁻¹, Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹: keeps the part of a torque that leaves {E} still.
 
@@ -33,10 +35,12 @@ def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     self-motion (1 DOF for the 7-DoF arm), never the scope.
     """
     J = kin.J_E
-    A = J @ Minv @ J.T + 1e-9 * np.eye(6)
-    return np.eye(kin.M.shape[0]) - J.T @ np.linalg.solve(A, J @ Minv)
+    JT = np.ascontiguousarray(J.T)
+    A = J @ Minv @ JT + 1e-9 * np.eye(6)
+    return np.eye(kin.M.shape[0]) - JT @ np.linalg.solve(A, J @ Minv)
 
 
+@kernel
 def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     """Damping matrix B_s of the arm's self-motion: τ_s = -B_s θ̇, B_s = d N_Eᵀ M = d M N_E.
 
@@ -52,6 +56,18 @@ def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     return rate * N_E_T @ kin.M
 
 
+@kernel
+def damping_jacobian(J_R: Mat, Kd: float, N_r: Mat, J_G: Mat, D: Mat, B_self: Mat) -> Mat:
+    """B = J_Rᵀ K_d J_R + N_rᵀ J_Gᵀ D J_G + B_s: the θ̇-Jacobian of -τ, for the semi-implicit step.
+
+    The terms are eq (14)'s K_d ė_R through J_R (eq 2), the damping sources' -D J_G θ̇ (eq 40)
+    through the null space (eq 2, 37) and the self-motion damping B_s.
+    """
+    J_RT, N_rT = np.ascontiguousarray(J_R.T), np.ascontiguousarray(N_r.T)
+    return Kd * J_RT @ J_R + N_rT @ (np.ascontiguousarray(J_G.T) @ (D @ J_G)) + B_self
+
+
+@kernel
 def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: float) -> Vec:
     """-k ∇H(q), H = ½ Σ_i (distance of q_i into the ``zone`` next to either limit)²: a push away
     from each joint limit that is zero outside the zone and grows linearly inside it (N m).
@@ -62,6 +78,7 @@ def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: f
     return stiffness * (np.maximum(lower + zone - q, 0.0) - np.maximum(q - (upper - zone), 0.0))
 
 
+@kernel
 def euler_velocity_step(
     kin: Kinematics,
     tau: Vec,

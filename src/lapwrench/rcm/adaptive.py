@@ -34,40 +34,99 @@ none`` gives w = 1 always: eq (24) as printed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from lapwrench.config import AdaptiveRcmConfig
+from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
 from lapwrench.spatial import Mat, Vec
 
+GATE_SIGNALS = ("angular_speed", "linear_speed", "angular_acceleration", "linear_acceleration")
 
+
+class AdaptiveParams(NamedTuple):
+    """The adaptive-RCM configuration as one tuple of scalars for the compiled maths."""
+
+    enabled: bool
+    F_op: float
+    gamma1: float
+    gamma2: float
+    ramp: str
+    alpha: float
+    beta: float
+    epsilon: float
+    gate: bool  # True: ``gate: speed``; False: ``gate: none`` (w = 1)
+    gate_angular_speed: float
+    gate_linear_speed: float
+    gate_angular_acceleration: float
+    gate_linear_acceleration: float
+    gate_soft: float
+    gate_filter_time: float
+    gate_release_time: float
+
+    @staticmethod
+    def from_config(c: AdaptiveRcmConfig) -> AdaptiveParams:
+        return AdaptiveParams(
+            bool(c.enabled), float(c.F_op), float(c.gamma1), float(c.gamma2), c.ramp, float(c.alpha),
+            float(c.beta), float(c.epsilon), c.gate == "speed", float(c.gate_angular_speed),
+            float(c.gate_linear_speed), float(c.gate_angular_acceleration), float(c.gate_linear_acceleration),
+            float(c.gate_soft), float(c.gate_filter_time), float(c.gate_release_time),
+        )
+
+
+class AdaptiveState(NamedTuple):
+    """The adaptive point's state, updated in place by :func:`adaptive_rcm_step`.
+
+    ``scalars`` = [gate weight w, acceleration filter started (0/1), anchor updates, the four gate
+    signals of :data:`GATE_SIGNALS`].
+    """
+
+    p_R: Vec
+    p_R_anchor: Vec
+    velocity: Vec
+    twist_f: Vec
+    scalars: Vec
+
+    @staticmethod
+    def start(p_R: Vec) -> AdaptiveState:
+        p = np.array(p_R, dtype=float)
+        scalars = np.zeros(7)
+        scalars[0] = 1.0
+        return AdaptiveState(p, p.copy(), np.zeros(3), np.zeros(6), scalars)
+
+
+@kernel
 def residual_force(F_s: Vec, F_m: Vec) -> Vec:
     """Eq (19), per axis: ΔF = F_s - F_m (both in {B}; see the module docstring for signs)."""
     return F_s - F_m
 
 
-def dead_zone_saturation(residual: Vec, cfg: AdaptiveRcmConfig) -> Vec:
+@kernel
+def dead_zone_saturation(residual: Vec, gamma1: float, gamma2: float, F_op: float, ramp: str) -> Vec:
     """Eqs (20)-(22), per axis: F_re = sgn(ΔF) Φ(|ΔF|), Φ the dead-zone / sine / saturation map."""
-    return np.array(
-        [
-            math.copysign(sine_ramp(abs(x), cfg.gamma1, cfg.gamma2, cfg.F_op, cfg.ramp), x) if x else 0.0
-            for x in np.asarray(residual, dtype=float).tolist()
-        ]
-    )
+    out = np.zeros(3)
+    for i in range(3):
+        x = residual[i]
+        if x != 0.0:
+            out[i] = math.copysign(sine_ramp(abs(x), gamma1, gamma2, F_op, ramp), x)
+    return out
 
 
+@kernel
 def lateral_component(P: Mat, F_re: Vec) -> Vec:
     """Eq (23): F_re⊥ = P(θ) F_re, the part of the residual orthogonal to the shaft."""
     return P @ F_re
 
 
+@kernel
 def rcm_point_rate(F_re_lateral: Vec, p_R: Vec, p_R_anchor: Vec, alpha: float, beta: float) -> Vec:
     """Eq (24): ṗ_R = -α F_re⊥ - β (p_R - p_R*)."""
     return -alpha * F_re_lateral - beta * (p_R - p_R_anchor)
 
 
+@kernel
 def gate_ramp(x: float, limit: float, soft: float) -> float:
     """Weight of one gate signal: 1 up to ``soft * limit``, a half-cosine down to 0 at ``limit``, 0 beyond."""
     lo = soft * limit
@@ -78,77 +137,123 @@ def gate_ramp(x: float, limit: float, soft: float) -> float:
     return 0.5 * (1.0 + math.cos(math.pi * (x - lo) / (limit - lo)))
 
 
-@dataclass
-class MotionGate:
-    """The weight w of eq (24)'s estimate-driven term from the scope's commanded motion (module docstring).
+@kernel
+def gate_weight(st: AdaptiveState, P: Mat, twist: Vec, dt: float, p: AdaptiveParams) -> float:
+    """The motion gate's weight w of eq (24)'s estimate-driven term (module docstring), one tick.
 
-    :meth:`update` takes the twist ``[ω; v]`` of {E} in {B} (eq 33) once per tick. The accelerations
-    are the derivative of the twist through a first-order filter (backward Euler, time constant
-    ``gate_filter_time``); the first twist seen starts the filter at rest.
+    The accelerations are the derivative of the twist ``[ω; v]`` of {E} through a first-order
+    filter (backward Euler, time constant ``gate_filter_time``); the first twist seen starts the
+    filter at rest. Updates ``st.twist_f`` and ``st.scalars`` (w, signals) in place.
     """
+    sc = st.scalars
+    if not p.gate:
+        sc[0] = 1.0
+        return 1.0
+    if sc[1] == 0.0:
+        st.twist_f[:] = twist
+        sc[1] = 1.0
+    k = dt / (p.gate_filter_time + dt)
+    step = k * (twist - st.twist_f)
+    st.twist_f[:] = st.twist_f + step
+    accel = step / dt
+    w_ang, a_ang = P @ twist[:3], P @ accel[:3]
+    sc[3] = math.sqrt(w_ang @ w_ang)
+    sc[4] = math.sqrt(twist[3:] @ twist[3:])
+    sc[5] = math.sqrt(a_ang @ a_ang)
+    sc[6] = math.sqrt(accel[3:] @ accel[3:])
+    w_raw = min(
+        gate_ramp(sc[3], p.gate_angular_speed, p.gate_soft),
+        gate_ramp(sc[4], p.gate_linear_speed, p.gate_soft),
+        gate_ramp(sc[5], p.gate_angular_acceleration, p.gate_soft),
+        gate_ramp(sc[6], p.gate_linear_acceleration, p.gate_soft),
+    )
+    release = math.inf if p.gate_release_time == 0.0 else dt / p.gate_release_time
+    sc[0] = min(w_raw, sc[0] + release)
+    return sc[0]
 
-    cfg: AdaptiveRcmConfig
-    weight: float = 1.0
-    signals: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-    _twist_f: Vec | None = field(init=False, default=None)
 
-    SIGNALS = ("angular_speed", "linear_speed", "angular_acceleration", "linear_acceleration")
+@kernel
+def adaptive_rcm_step(
+    st: AdaptiveState, P: Mat, residual: Vec, has_residual: bool, twist: Vec, dt: float, p: AdaptiveParams
+) -> Vec:
+    """One tick of eq (24)-(26) with the gate's weight, explicit Euler over ``dt``; updates ``st`` in place.
+
+    The anchor is reset to p_R where ‖ṗ_R‖ <= ε (eq 25-26). Returns the mapped lateral residual
+    F_re⊥ (eq 23, before the gate's weight; zeros without a residual).
+    """
+    w = gate_weight(st, P, twist, dt, p)
+    F_lat = np.zeros(3)
+    if not p.enabled:
+        st.velocity[:] = 0.0
+        return F_lat
+    if has_residual:
+        F_lat = lateral_component(P, dead_zone_saturation(residual, p.gamma1, p.gamma2, p.F_op, p.ramp))
+    st.velocity[:] = rcm_point_rate(w * F_lat, st.p_R, st.p_R_anchor, p.alpha, p.beta)
+    if math.sqrt(st.velocity @ st.velocity) <= p.epsilon:  # eq (25)
+        st.p_R_anchor[:] = st.p_R  # eq (26)
+        st.scalars[2] += 1.0
+    st.p_R[:] = st.p_R + dt * st.velocity
+    return F_lat
+
+
+class MotionGateView:
+    """Read-only view of the gate's weight, signals and thresholds (telemetry, tests)."""
+
+    SIGNALS = GATE_SIGNALS
+
+    def __init__(self, owner: AdaptiveRcm) -> None:
+        self._owner = owner
+
+    @property
+    def weight(self) -> float:
+        return float(self._owner.state.scalars[0])
+
+    @property
+    def signals(self) -> tuple[float, float, float, float]:
+        s = self._owner.state.scalars
+        return (float(s[3]), float(s[4]), float(s[5]), float(s[6]))
 
     @property
     def limits(self) -> tuple[float, float, float, float]:
         """The thresholds of :attr:`signals` (rad/s, m/s, rad/s², m/s²), in :attr:`SIGNALS` order."""
-        c = self.cfg
+        c = self._owner.cfg
         return (c.gate_angular_speed, c.gate_linear_speed, c.gate_angular_acceleration, c.gate_linear_acceleration)
 
-    def update(self, P: Mat, twist_E: Vec, dt: float) -> float:
-        """Advance one tick; returns w ∈ [0, 1] (always 1 with ``gate: none``)."""
-        cfg = self.cfg
-        if cfg.gate == "none":
-            self.weight = 1.0
-            return 1.0
-        twist = np.asarray(twist_E, dtype=float)
-        accel = self._filtered_acceleration(twist, dt)
-        self.signals = (_norm(P @ twist[:3]), _norm(twist[3:]), _norm(P @ accel[:3]), _norm(accel[3:]))
-        w_raw = min(gate_ramp(x, lim, cfg.gate_soft) for x, lim in zip(self.signals, self.limits, strict=True))
-        release = math.inf if cfg.gate_release_time == 0.0 else dt / cfg.gate_release_time
-        self.weight = min(w_raw, self.weight + release)
-        return self.weight
 
-    def _filtered_acceleration(self, twist: Vec, dt: float) -> Vec:
-        if self._twist_f is None:
-            self._twist_f = twist.copy()
-        k = dt / (self.cfg.gate_filter_time + dt)
-        step = k * (twist - self._twist_f)
-        self._twist_f = self._twist_f + step
-        return step / dt
-
-
-def _norm(v: Vec) -> float:
-    return math.sqrt(float(v @ v))
-
-
-@dataclass
 class AdaptiveRcm:
     """The adaptive RCM point p_R and its piecewise-constant anchor p_R* (eq 24-26).
 
     Each :meth:`update` integrates eq (24), with its estimate-driven term weighted by the motion
-    gate, with explicit Euler over ``dt``. The anchor is reset to p_R at the instants where
-    ‖ṗ_R‖ <= ε (eq 25-26) and held constant in between. With adaptation disabled p_R stays at its
-    initial value.
+    gate, with explicit Euler over ``dt`` (:func:`adaptive_rcm_step`). The anchor is reset to p_R
+    at the instants where ‖ṗ_R‖ <= ε (eq 25-26) and held constant in between. With adaptation
+    disabled p_R stays at its initial value.
     """
 
-    cfg: AdaptiveRcmConfig
-    p_R: Vec
-    p_R_anchor: Vec = field(init=False)
-    velocity: Vec = field(init=False)
-    anchor_updates: int = field(init=False, default=0)
-    gate: MotionGate = field(init=False)
+    def __init__(self, cfg: AdaptiveRcmConfig, p_R: Vec) -> None:
+        self.cfg = cfg
+        self.params = AdaptiveParams.from_config(cfg)
+        self.state = AdaptiveState.start(p_R)
+        self.gate = MotionGateView(self)
 
-    def __post_init__(self) -> None:
-        self.p_R = np.array(self.p_R, dtype=float)
-        self.p_R_anchor = self.p_R.copy()
-        self.velocity = np.zeros(3)
-        self.gate = MotionGate(self.cfg)
+    @property
+    def p_R(self) -> Vec:
+        return self.state.p_R
+
+    @p_R.setter
+    def p_R(self, value: Vec) -> None:
+        self.state.p_R[:] = value
+
+    @property
+    def p_R_anchor(self) -> Vec:
+        return self.state.p_R_anchor
+
+    @property
+    def velocity(self) -> Vec:
+        return self.state.velocity
+
+    @property
+    def anchor_updates(self) -> int:
+        return int(self.state.scalars[2])
 
     @property
     def gate_weight(self) -> float:
@@ -162,14 +267,7 @@ class AdaptiveRcm:
         None counts as a scope at rest. Returns the mapped lateral residual F_re⊥ (eq 23, before
         the gate's weight).
         """
-        w = self.gate.update(P, np.zeros(6) if twist_E is None else twist_E, dt)
-        if not self.cfg.enabled:
-            self.velocity = np.zeros(3)
-            return np.zeros(3)
-        F_lat = np.zeros(3) if residual is None else lateral_component(P, dead_zone_saturation(residual, self.cfg))
-        self.velocity = rcm_point_rate(w * F_lat, self.p_R, self.p_R_anchor, self.cfg.alpha, self.cfg.beta)
-        if math.sqrt(self.velocity @ self.velocity) <= self.cfg.epsilon:  # eq (25)
-            self.p_R_anchor = self.p_R.copy()  # eq (26)
-            self.anchor_updates += 1
-        self.p_R = self.p_R + dt * self.velocity
-        return F_lat
+        twist = np.zeros(6) if twist_E is None else np.asarray(twist_E, dtype=float)
+        r = np.zeros(3) if residual is None else np.asarray(residual, dtype=float)
+        P = np.asarray(P, dtype=float)
+        return adaptive_rcm_step(self.state, P, r, residual is not None, twist, dt, self.params)

@@ -5,27 +5,49 @@ All quantities are in the base frame {B}; ``kin`` is the tick's :class:`Kinemati
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
+from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec, skew
 
 
+class TaskGeometry(NamedTuple):
+    """RCM and closest-point quantities of one tick (eq 27-36)."""
+
+    p_R: Vec
+    rcm_velocity: Vec
+    e_R: Vec
+    e_R_rate: Vec
+    J_R: Mat
+    s_star: float
+    p_G: Vec
+    o_G: Vec
+    J_G: Mat
+    e_R_offset: Vec  # measured minus reference e_R (m), filtered
+
+
+@kernel
 def initial_rcm_point(kin: Kinematics, length: float, lambda0: float) -> Vec:
     """Eq (18): p_R(t0) = p_E(θ0) + λ0 L d_z(θ0)."""
     return kin.p_E + lambda0 * length * kin.d_z
 
 
+@kernel
 def rcm_error(kin: Kinematics, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
     return kin.P @ (p_R - kin.p_E)
 
 
+@kernel
 def insertion_depth(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
     return length - float(kin.d_z @ (p_R - kin.p_E))
 
 
+@kernel
 def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """Eq (28): J_R = ∂e_R/∂θ (3 x n), analytic.
 
@@ -44,6 +66,7 @@ def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return ((d @ r) * Sd + np.outer(d, r @ Sd)) @ J_w - kin.P @ J_v
 
 
+@kernel
 def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """P J_R = (d_zᵀ r) [d_z]x J_Eω - P J_Ev: the RCM Jacobian restricted to the lateral plane.
 
@@ -57,24 +80,28 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return (d @ r) * skew(d) @ kin.J_E[:3] - kin.P @ kin.J_E[3:]
 
 
+@kernel
 def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
     return J_R @ kin.dq + kin.P @ rcm_velocity
 
 
+@kernel
 def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
     s = float(kin.d_z @ (p_R - kin.p_E)) / length
     return min(1.0, max(0.0, s))
 
 
+@kernel
 def closest_point(kin: Kinematics, s_star: float, length: float) -> tuple[Vec, Vec]:
     """Eqs (31)-(32): p_G = p_E + s* L d_z and its offset o_G = s* L d_z."""
     o_G = s_star * length * kin.d_z
     return kin.p_E + o_G, o_G
 
 
+@kernel
 def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
     """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
     J_w = kin.J_E[:3]
-    return np.vstack([J_w, kin.J_E[3:] - skew(o_G) @ J_w])
+    return np.vstack((J_w, kin.J_E[3:] - skew(o_G) @ J_w))

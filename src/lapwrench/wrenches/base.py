@@ -9,30 +9,13 @@ null-space source.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-import numpy as np
-
+from lapwrench.rcm.geometry import TaskGeometry
 from lapwrench.robot.model import Kinematics
 from lapwrench.sensors import ValidInputs
-from lapwrench.spatial import Mat, Vec, Wrench
-
-
-@dataclass(frozen=True)
-class TaskGeometry:
-    """RCM and closest-point quantities of one tick (eq 27-36)."""
-
-    p_R: Vec
-    rcm_velocity: Vec
-    e_R: Vec
-    e_R_rate: Vec
-    J_R: Mat
-    s_star: float
-    p_G: Vec
-    o_G: Vec
-    J_G: Mat
-    e_R_offset: Vec = field(default_factory=lambda: np.zeros(3))  # measured minus reference e_R (m), filtered
+from lapwrench.spatial import Mat, Wrench
 
 
 @dataclass(frozen=True)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.config import RcmConfig
+from lapwrench.jit import kernel
 from lapwrench.spatial import Vec, Wrench
 from lapwrench.wrenches.base import TickContext
 
 
+@kernel
 def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     """Eq (14): F_r = -K_p e_R - K_d ė_R, with K_p = Kp I3 and K_d = Kd I3."""
     return -Kp * e_R - Kd * e_R_rate

@@ -3,30 +3,57 @@
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from lapwrench.config import CameraConfig, TrackingConfig
+from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
 from lapwrench.spatial import Mat, Vec, Wrench
 from lapwrench.wrenches.base import TickContext
 
 
+class TrackingParams(NamedTuple):
+    """The camera intrinsics and tracking gains eq (8)-(12) read, as one tuple for the compiled maths."""
+
+    fx: float
+    fy: float
+    u0: float
+    v0: float
+    epsilon1: float
+    epsilon2: float
+    F_max: float
+    ramp: str
+    direction: str
+
+    @staticmethod
+    def from_config(camera: CameraConfig, cfg: TrackingConfig) -> TrackingParams:
+        return TrackingParams(
+            float(camera.fx), float(camera.fy), float(camera.u0), float(camera.v0),
+            float(cfg.epsilon1), float(cfg.epsilon2), float(cfg.F_max), cfg.ramp, cfg.direction,
+        )
+
+
+@kernel
 def pixel_distance(u: float, v: float, u0: float, v0: float) -> float:
     """Eq (9): d_i = sqrt((u_i - u0)² + (v_i - v0)²)."""
     return math.hypot(u - u0, v - v0)
 
 
-def tracking_force_magnitude(d: float, cfg: TrackingConfig) -> float:
+@kernel
+def tracking_force_magnitude(d: float, p: TrackingParams) -> float:
     """Eq (10): F_v(d_i), zero inside ε1, sine transition to F_max at ε2 (see :mod:`lapwrench.shaping`)."""
-    return sine_ramp(d, cfg.epsilon1, cfg.epsilon2, cfg.F_max, cfg.ramp)
+    return sine_ramp(d, p.epsilon1, p.epsilon2, p.F_max, p.ramp)
 
 
-def unit_depth_ray(u: float, v: float, cam: CameraConfig, R_C: Mat) -> Vec:
+@kernel
+def unit_depth_ray(u: float, v: float, p: TrackingParams, R_C: Mat) -> Vec:
     """Eq (11): P'_i = (u_i - u0)/f_x x_C + (v_i - v0)/f_y y_C + z_C, in {B}."""
-    return R_C @ np.array([(u - cam.u0) / cam.fx, (v - cam.v0) / cam.fy, 1.0])
+    return R_C @ np.array([(u - p.u0) / p.fx, (v - p.v0) / p.fy, 1.0])
 
 
+@kernel
 def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
     """Eq (12): V_i = ((z_C x P'_i) x P'_i) / ‖·‖.
 
@@ -41,17 +68,20 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
     Returns zeros when the ray is along z_C (the instrument sits on the principal point).
     """
     w = ray - ray @ z_C * z_C if variant == "image_plane" else np.cross(np.cross(z_C, ray), ray)
-    n = np.linalg.norm(w)
+    n = math.sqrt(w @ w)
     return w / n if n > 1e-12 else np.zeros(3)
 
 
-def virtual_force(points: Vec, cam: CameraConfig, cfg: TrackingConfig, R_C: Mat) -> Vec:
+@kernel
+def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
     """Eq (8), force part: F_c = Σ F_v(d_i) V_i over the n_s detected instruments (0 if n_s = 0)."""
     F = np.zeros(3)
-    for u, v in points:
-        mag = tracking_force_magnitude(pixel_distance(u, v, cam.u0, cam.v0), cfg)
+    z_C = np.ascontiguousarray(R_C[:, 2])
+    for i in range(points.shape[0]):
+        u, v = points[i, 0], points[i, 1]
+        mag = tracking_force_magnitude(pixel_distance(u, v, p.u0, p.v0), p)
         if mag > 0.0:
-            F += mag * tracking_direction(unit_depth_ray(u, v, cam, R_C), R_C[:, 2], cfg.direction)
+            F += mag * tracking_direction(unit_depth_ray(u, v, p, R_C), z_C, p.direction)
     return F
 
 
@@ -63,9 +93,10 @@ class TrackingWrench:
     def __init__(self, camera: CameraConfig, cfg: TrackingConfig) -> None:
         self.camera = camera
         self.cfg = cfg
+        self.params = TrackingParams.from_config(camera, cfg)
 
     def compute(self, ctx: TickContext) -> Wrench:
         obs = ctx.inputs.instruments
         if obs is None or len(obs.points) == 0:
             return Wrench.zero(ctx.kin.p_C)
-        return Wrench(np.zeros(3), virtual_force(obs.points, self.camera, self.cfg, ctx.kin.R_C), ctx.kin.p_C)
+        return Wrench(np.zeros(3), virtual_force(obs.points, self.params, ctx.kin.R_C), ctx.kin.p_C)

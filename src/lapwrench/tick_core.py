@@ -1,0 +1,373 @@
+"""The compiled maths of one control tick, top-down like the paper's Fig. 3.
+
+:class:`~lapwrench.controller.Controller` validates the sensors and asks Pinocchio for the
+kinematics and M⁻¹ once per tick; everything after that is two compiled calls:
+
+1. :func:`geometry_stage`: the adaptive RCM point (eq 19-26), the RCM error (eq 27), what the
+   measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry
+   (eq 28-36);
+2. :func:`motion_stage`: the wrenches (eq 5-14, 40), the task/null-space allocation (eq 2-4,
+   37-39), the self-motion terms, the integration of the virtual model, the joint-limit box and
+   the envelope rows.
+
+Between them the controller evaluates any extra (Python) wrench sources on the tick's geometry.
+The limits are then met by :func:`lapwrench.motion.saturation.saturate` only when the desired
+acceleration breaks one of them, and :func:`~lapwrench.motion.reference_shaper.advance_reference`
+gives the next reference. Each equation is the one function of its module, compiled
+(:mod:`lapwrench.jit`); nothing here re-derives one.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from lapwrench.allocation import (
+    nullspace_projector,
+    nullspace_torque,
+    nullspace_wrench,
+    task_priority_torque,
+    weighted_pseudo_inverse,
+)
+from lapwrench.config import Config
+from lapwrench.jit import kernel
+from lapwrench.motion.envelope import EnvelopeParams, envelope_rows
+from lapwrench.motion.measured_feedback import FEEDBACK_TIME, feedback_step
+from lapwrench.motion.reference_shaper import acceleration_bounds, advance_reference
+from lapwrench.motion.saturation import VIOLATION_TOL
+from lapwrench.motion.virtual_model import (
+    damping_jacobian,
+    euler_velocity_step,
+    joint_limit_torque,
+    self_motion_damping,
+    self_motion_projector,
+)
+from lapwrench.rcm.adaptive import AdaptiveParams, AdaptiveState, adaptive_rcm_step, residual_force
+from lapwrench.rcm.geometry import (
+    TaskGeometry,
+    closest_point,
+    closest_point_jacobian,
+    closest_point_parameter,
+    lateral_rcm_jacobian,
+    rcm_error,
+    rcm_error_rate,
+    rcm_jacobian,
+)
+from lapwrench.robot.limits import JointLimits
+from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
+from lapwrench.spatial import Mat, Vec
+from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
+from lapwrench.wrenches.rcm import rcm_force
+from lapwrench.wrenches.tracking import TrackingParams, virtual_force
+
+
+class TickParams(NamedTuple):
+    """The configuration the compiled tick reads, gathered once when the controller is built."""
+
+    dt: float
+    length: float
+    Kp: float
+    Kd: float
+    lateral: bool  # motion.rcm_task == "lateral"
+    k_H: float
+    k_min: int
+    contact_threshold: float
+    tracking: TrackingParams
+    D_guided: Mat  # diag(k_t I3, k_f I3), eq (40), while the handle is gripped
+    D_unguided: Mat  # diag(k_t_unguided I3, k_f I3) otherwise
+    self_motion_damping: float
+    joint_limit_zone: float
+    joint_limit_stiffness: float
+    stop_time: float
+    integrator: str
+    q_lo: Vec  # joint position band of the shaper (limits minus the margin)
+    q_hi: Vec
+    v_max: Vec  # scaled joint limits
+    a_max: Vec
+    j_max: Vec
+    envelope_enabled: bool
+    envelope: EnvelopeParams
+    feedback_gain: float  # dt / FEEDBACK_TIME of motion/measured_feedback.py
+    feedback_cap: float  # m, 2 x safety.max_rcm_error
+
+    @staticmethod
+    def from_config(cfg: Config, limits: JointLimits) -> TickParams:
+        lim = limits.scaled(cfg.robot.limit_fraction)
+        v, m, margin = cfg.viscous, cfg.motion, cfg.robot.position_margin
+        return TickParams(
+            dt=float(cfg.robot.dt),
+            length=float(cfg.scope.length),
+            Kp=float(cfg.rcm.Kp),
+            Kd=float(cfg.rcm.Kd),
+            lateral=m.rcm_task == "lateral",
+            k_H=float(cfg.interaction.k_H),
+            k_min=int(cfg.interaction.k_min),
+            contact_threshold=float(cfg.interaction.contact_threshold),
+            tracking=TrackingParams.from_config(cfg.camera, cfg.tracking),
+            D_guided=np.diag([v.k_t] * 3 + [v.k_f] * 3).astype(float),
+            D_unguided=np.diag([v.k_t_unguided] * 3 + [v.k_f] * 3).astype(float),
+            self_motion_damping=float(m.self_motion_damping),
+            joint_limit_zone=float(m.joint_limit_zone),
+            joint_limit_stiffness=float(m.joint_limit_stiffness),
+            stop_time=float(m.stop_time),
+            integrator=m.integrator,
+            q_lo=np.asarray(limits.position_lower + margin, dtype=float),
+            q_hi=np.asarray(limits.position_upper - margin, dtype=float),
+            v_max=np.asarray(lim.velocity, dtype=float),
+            a_max=np.asarray(lim.acceleration, dtype=float),
+            j_max=np.asarray(lim.jerk, dtype=float),
+            envelope_enabled=bool(cfg.envelope.enabled),
+            envelope=EnvelopeParams.from_config(cfg.envelope),
+            feedback_gain=float(cfg.robot.dt / max(FEEDBACK_TIME, cfg.robot.dt)),
+            feedback_cap=float(2.0 * cfg.safety.max_rcm_error),
+        )
+
+
+@kernel
+def geometry_stage(
+    kin: Kinematics,
+    rcm: AdaptiveState,
+    adaptive: AdaptiveParams,
+    residual: Vec,
+    has_residual: bool,
+    offsets: Vec,
+    measured: ScopeAxis,
+    has_measured: bool,
+    p: TickParams,
+) -> tuple[TaskGeometry, Vec]:
+    """Steps 2-3 of the tick: the adaptive point (eq 19-26; ``rcm`` in place), the RCM error
+    (eq 27), the measured-feedback offsets (``offsets`` in place) and the task geometry (eq 28-36).
+
+    Returns the geometry and the mapped lateral residual F_re⊥ (eq 23).
+    """
+    twist = kin.J_E @ kin.dq
+    F_lat = adaptive_rcm_step(rcm, kin.P, residual, has_residual, twist, p.dt, adaptive)
+    p_R = rcm.p_R.copy()
+    e_R = rcm_error(kin, p_R)
+    feedback_step(offsets, measured, has_measured, kin, p_R, e_R, p.length, p.feedback_gain, p.feedback_cap)
+    J_R = lateral_rcm_jacobian(kin, p_R) if p.lateral else rcm_jacobian(kin, p_R)
+    s_star = closest_point_parameter(kin, p_R, p.length)
+    p_G, o_G = closest_point(kin, s_star, p.length)
+    velocity = rcm.velocity.copy()
+    geo = TaskGeometry(
+        p_R, velocity, e_R, rcm_error_rate(kin, J_R, velocity), J_R, s_star, p_G, o_G,
+        closest_point_jacobian(kin, o_G), offsets[:3].copy(),
+    )
+    return geo, F_lat
+
+
+class MotionOutput(NamedTuple):
+    """What :func:`motion_stage` computes: wrenches (``[moment; force]`` in {B}), torques, the desired
+    acceleration and the limits it must meet."""
+
+    W_r: Vec  # about p_R
+    W_h: Vec  # about p_H
+    W_c: Vec  # about p_C
+    W_f: Vec  # about p_G
+    W_n: Vec  # eq (38), about p_G
+    delta: float
+    contacts: int
+    tau: Vec
+    non_finite: bool  # the fused torque was not finite and was replaced by zero (braking)
+    a_d: Vec  # desired joint acceleration of the virtual model (after the null-space brake, if stopping)
+    a_lo: Vec  # joint box of the shaper
+    a_hi: Vec
+    J_task: Mat  # 2 x n lateral RCM task, [x_E y_E]ᵀ J_R
+    env_W: Mat  # envelope rows on the twist of {E} (4 x 6), their bounds, scales and wall names
+    env_lo: Vec
+    env_hi: Vec
+    env_scale: Vec
+    env_wall: np.ndarray
+    admitted: bool  # a_d meets the joint box and the envelope: nothing to saturate
+
+
+@kernel
+def null_brake(J_task: Mat, Minv: Mat, dq: Vec, stop_time: float) -> Vec:
+    """N θ̇ / T_stop with N = I - J⁺ J (J⁺ M-weighted, eq 3-4): a deceleration of the null-space motion only."""
+    J_pinv = weighted_pseudo_inverse(J_task, Minv)
+    return (dq - J_pinv @ (J_task @ dq)) / stop_time
+
+
+@kernel
+def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
+    """True if some row's violation exceeds the round-off tolerance (motion/saturation.py)."""
+    worst = -np.inf
+    for i in range(y.shape[0]):
+        worst = max(worst, max(lo[i] - y[i], y[i] - hi[i]) / scale[i])
+    return worst > VIOLATION_TOL
+
+
+@kernel
+def motion_stage(
+    kin: Kinematics,
+    Minv: Mat,
+    geo: TaskGeometry,
+    ft_force: Vec,
+    ft_torque: Vec,
+    has_ft: bool,
+    tactile: Vec,
+    has_tactile: bool,
+    points: Mat,
+    extra_W: Mat,
+    extra_points: Mat,
+    extra_D: Mat,
+    ddq_ref: Vec,
+    stopping: bool,
+    R_E0: Mat,
+    depth_offset: float,
+    p: TickParams,
+) -> MotionOutput:
+    """Steps 4-7 of the tick (module docstring); ``extra_*`` are the extra sources' wrenches (rows
+    about ``extra_points``) and the sum of their damping matrices (eq 40's form, 6 x 6)."""
+    # 4. wrenches (eq 5-14, 40), each in {B} about its own point
+    W_r = np.zeros(6)
+    W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
+    delta, contacts = 0.0, 0
+    if has_tactile:
+        delta, contacts = grip_gain(tactile, p.k_H, p.k_min, p.contact_threshold)
+    W_h = np.zeros(6)
+    if has_ft and delta != 0.0:
+        W_h[:3], W_h[3:] = interaction_wrench(ft_force, ft_torque, kin.R_H, delta)
+    W_c = np.zeros(6)
+    W_c[3:] = virtual_force(points, p.tracking, kin.R_C)
+    D = p.D_guided if delta > 0.0 else p.D_unguided
+    W_f = -D @ (geo.J_G @ kin.dq)
+
+    # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
+    n_extra = extra_W.shape[0]
+    W_all = np.zeros((3 + n_extra, 6))
+    P_all = np.zeros((3 + n_extra, 3))
+    W_all[0], W_all[1], W_all[2] = W_h, W_c, W_f
+    P_all[0], P_all[1], P_all[2] = kin.p_H, kin.p_C, geo.p_G
+    W_all[3:] = extra_W
+    P_all[3:] = extra_points
+    J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
+    N_r = nullspace_projector(geo.J_R, J_pinv)
+    W_n = nullspace_wrench(W_all, P_all, geo.p_G)
+    tau_n = np.zeros(kin.q.shape[0]) if stopping else nullspace_torque(geo.J_G, W_n)
+    N_E_T = self_motion_projector(kin, Minv)
+    B_self = self_motion_damping(kin, N_E_T, p.self_motion_damping)
+    push = np.zeros(kin.q.shape[0])
+    if p.joint_limit_stiffness != 0.0:
+        push = joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
+    tau = task_priority_torque(geo.J_R, W_r[3:], N_r, tau_n) + N_E_T @ push - B_self @ kin.dq
+
+    # 6. integration of the virtual model, damping terms implicit
+    B = damping_jacobian(geo.J_R, p.Kd, N_r, geo.J_G, D + extra_D, B_self)
+    non_finite = not np.isfinite(tau).all()
+    if non_finite:
+        tau = np.zeros(kin.q.shape[0])
+    dq_next = euler_velocity_step(kin, tau, B, p.dt, p.integrator)
+    a_d = (dq_next - kin.dq) / p.dt
+
+    # 7. the limits: joint box, envelope rows; the null-space brake while stopping
+    a_lo, a_hi = acceleration_bounds(kin.q, kin.dq, ddq_ref, p.q_lo, p.q_hi, p.v_max, p.a_max, p.j_max, p.dt)
+    J_task = np.ascontiguousarray(kin.R_E[:, :2].T) @ geo.J_R
+    if stopping:
+        a_d = a_d - null_brake(J_task, Minv, kin.dq, p.stop_time)
+    admitted = not _violated(a_lo, a_hi, a_d, p.a_max)
+    env_W, env_lo, env_hi = np.zeros((4, 6)), np.zeros(4), np.zeros(4)
+    env_scale, env_wall = np.ones(4), np.zeros(4, dtype=np.int64)
+    if p.envelope_enabled:
+        env_W, env_lo, env_hi, env_scale, env_wall = envelope_rows(
+            kin, geo.p_R, a_d, depth_offset, R_E0, p.envelope, p.length, p.dt
+        )
+        admitted = admitted and not _violated(env_lo, env_hi, env_W @ (kin.J_E @ a_d), env_scale)
+    return MotionOutput(
+        W_r, W_h, W_c, W_f, W_n, delta, contacts, tau, non_finite, a_d, a_lo, a_hi, J_task,
+        env_W, env_lo, env_hi, env_scale, env_wall, admitted,
+    )
+
+
+class SaturationInputs(NamedTuple):
+    """Preallocated arrays the compiled tick fills for the saturation step (used only when the desired
+    acceleration breaks a limit; overwritten every tick): the rows lo <= C a <= hi on the joint
+    acceleration, the joint box first (n rows), then the envelope's four rows through J_E."""
+
+    a_d: Vec
+    J_task: Mat
+    M: Mat
+    C: Mat
+    lo: Vec
+    hi: Vec
+    scale: Vec
+    wall: np.ndarray  # the envelope rows' wall names (indices into WALL_NAMES)
+
+    @staticmethod
+    def allocate(n: int) -> SaturationInputs:
+        return SaturationInputs(
+            np.zeros(n), np.zeros((2, n)), np.eye(n), np.zeros((n + 4, n)), np.zeros(n + 4), np.zeros(n + 4),
+            np.ones(n + 4), np.zeros(4, dtype=np.int64),
+        )
+
+
+@kernel
+def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinematics, a_max: Vec) -> None:
+    """Write the saturation step's inputs into ``sat`` (the rows of :class:`SaturationInputs`)."""
+    n = kin.q.shape[0]
+    sat.a_d[:], sat.J_task[:], sat.M[:] = o.a_d, o.J_task, kin.M
+    sat.C[:] = 0.0
+    for i in range(n):
+        sat.C[i, i] = 1.0
+    sat.C[n:] = o.env_W @ kin.J_E
+    sat.lo[:n], sat.hi[:n], sat.scale[:n] = o.a_lo, o.a_hi, a_max
+    sat.lo[n:], sat.hi[n:], sat.scale[n:] = o.env_lo, o.env_hi, o.env_scale
+    sat.wall[:] = o.env_wall
+
+
+@kernel
+def tick_stage(
+    terms: KinematicTerms,
+    Minv: Mat,
+    rcm: AdaptiveState,
+    adaptive: AdaptiveParams,
+    ext_force: Vec,
+    has_ext: bool,
+    offsets: Vec,
+    measured: ScopeAxis,
+    has_measured: bool,
+    ft_force: Vec,
+    ft_torque: Vec,
+    has_ft: bool,
+    tactile: Vec,
+    has_tactile: bool,
+    points: Mat,
+    ddq_ref: Vec,
+    stopping: bool,
+    R_E0: Mat,
+    may_admit: bool,
+    sat: SaturationInputs,
+    p: TickParams,
+) -> tuple:  # type: ignore[type-arg]
+    """The whole compiled tick in one call, when there are no extra sources: the kinematics from
+    Pinocchio's terms, ΔF (eq 19) when the F/T and the robot's estimate are both valid,
+    :func:`geometry_stage`, :func:`motion_stage`, and — when the desired acceleration meets every
+    limit (and ``may_admit``) — the next reference. Otherwise ``sat`` holds what the saturation
+    step needs and the caller advances the reference.
+
+    Returns packed arrays (numba returns a few arrays much faster than many):
+    ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows
+    [q⁺, q̇⁺, q̈⁺] (valid when admitted), τ, and the scalars (δ, n_c, has ΔF, non-finite, admitted,
+    clamped).
+    """
+    kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
+                              terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
+    has_residual = has_ft and has_ext
+    residual = residual_force(kin.R_H @ ft_force, ext_force) if has_residual else np.zeros(3)
+    geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
+    o = motion_stage(
+        kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
+        np.zeros((0, 3)), np.zeros((6, 6)), ddq_ref, stopping, R_E0, offsets[3], p,
+    )
+    fill_saturation_inputs(sat, o, kin, p.a_max)
+    vec3 = np.empty((5, 3))
+    vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = geo.e_R, geo.p_R, geo.p_G, F_lat, residual
+    W = np.empty((5, 6))
+    W[0], W[1], W[2], W[3], W[4] = o.W_r, o.W_h, o.W_c, o.W_f, o.W_n
+    ref = np.zeros((3, kin.q.shape[0]))
+    admitted = o.admitted and may_admit
+    clamped = False
+    if admitted:
+        ref[0], ref[1], ref[2], clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, p.dt)
+    return vec3, W, ref, o.tau, o.delta, o.contacts, has_residual, o.non_finite, admitted, clamped
