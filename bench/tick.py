@@ -42,9 +42,9 @@ def _per_joint_clamp(ctrl: Controller) -> None:
     """Replace the saturation step by the old per-joint clamp (the reference for its cost)."""
 
     def clamp(r, t):  # type: ignore[no-untyped-def]
-        s = ctrl.compiled.sat
-        ctrl._a_lo, ctrl._a_hi = s.a_lo.copy(), s.a_hi.copy()
-        return SaturationResult(np.clip(s.a_d, s.a_lo, s.a_hi), (), (), True)
+        s, n = ctrl.compiled.sat, ctrl.model.nv
+        ctrl._a_lo, ctrl._a_hi = s.lo[:n].copy(), s.hi[:n].copy()
+        return SaturationResult(np.clip(s.a_d, ctrl._a_lo, ctrl._a_hi), (), (), True)
 
     ctrl._saturate = clamp  # type: ignore[method-assign]
 

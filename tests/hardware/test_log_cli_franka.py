@@ -53,14 +53,19 @@ def test_mcap_round_trip_and_report(tmp_path: Path) -> None:
     assert events == [{"time": 0.1, "kind": "rcm_error", "message": "RCM error 12 mm; holding"}]
     topics = {t for t, _ in iter_messages(path)}
     assert {CYCLE_TOPIC, EVENT_TOPIC} <= topics
-    # schemas are JSON schemas (what Foxglove needs to show the fields)
+    # every channel has a schema Foxglove can show the fields with: JSON schemas for the JSON messages,
+    # protobuf descriptors for the cycle and Foxglove's standard messages (tests/hardware/test_log.py)
     from mcap.reader import make_reader
 
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
-    assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
-    assert {c.message_encoding for c in summary.channels.values()} == {"json"}
+    schemas = {ch.topic: (summary.schemas[ch.schema_id], ch.message_encoding) for ch in summary.channels.values()}
+    assert {(schema.encoding, encoding) for schema, encoding in schemas.values()} == {
+        ("jsonschema", "json"),
+        ("protobuf", "protobuf"),
+    }
+    assert schemas[CYCLE_TOPIC][0].name == "lapwrench.Cycle"
     out = tmp_path / "report"
     assert hw.log_report_main(argparse.Namespace(log=str(path), out=str(out))) == 0
     for name in ("rcm_error.png", "wrenches.png", "mode.png", "joint_commands.png"):

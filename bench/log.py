@@ -1,0 +1,284 @@
+"""Benchmark: what logging costs the 1 kHz loop, against references measured in the same run.
+
+1. A paced loop (``--rate``, 1 kHz) hands ``--cycles`` records to a
+   :class:`~lapwrench.hardware.log.RunLogger` writing a temporary MCAP file (with the Panda
+   model, so the writer also computes the frame transforms at 100 Hz) and times, from the
+   caller's side, building the :class:`~lapwrench.hardware.log.CycleRecord` from arrays like the
+   runner's and ``RunLogger.cycle``. Blocks of 500 logged cycles alternate with 500 cycles
+   without logging (the writer idles), and the loop records how late it wakes up in both: the
+   sleep's overshoot, other processes, and any wait for the GIL held by the writer thread.
+2. On the same records: ``encode_cycle`` (the writer's work per record: the ``lapwrench.Cycle``
+   protobuf message filled and serialised by the ``google.protobuf`` library), ``decode_cycle``
+   (the reader's), ``json.dumps`` of one record's dict (what the JSON logger did per record) and
+   Pinocchio's ``computeAllTerms`` on the Panda model (as bench/tick.py).
+3. ``capacity`` records handed over at once and drained: the writer's sustained throughput.
+
+``--encode-only`` runs step 2 alone (a few seconds, no paced loop).
+
+Ratios are the machine-independent figures; the wake-up lateness depends on the machine's load.
+Last line: one JSON object.
+
+    python bench/log.py [--cycles N] [--rate HZ] [--no-model] [--encode-only]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from lapwrench.hardware.log import CYCLE_CAPACITY, CycleRecord, RunLogger, decode_cycle, encode_cycle, read_log
+from lapwrench.robot.model import RobotModel
+from lapwrench.virtual import DEFAULT_Q0
+
+Q0 = np.asarray(DEFAULT_Q0, dtype=float)
+
+
+def percentiles_us(samples_ns: list[int] | np.ndarray) -> tuple[float, float]:
+    """p50 and p99 in µs of durations in ns."""
+    a = np.asarray(samples_ns, dtype=float) / 1e3
+    return float(np.percentile(a, 50)), float(np.percentile(a, 99))
+
+
+def record_fields(k: int, rng: np.random.Generator) -> dict[str, Any]:
+    """The fields of cycle ``k``: fresh arrays of the runner's shapes (what ``ControlLoop._log``
+    puts in its record; the loop has them already, so building them is not timed)."""
+    t = k * 1e-3
+    q = Q0 + 0.05 * np.sin(t + np.arange(7))
+    return dict(
+        t=t,
+        robot_time=t,
+        k=k,
+        q=q,
+        dq=0.01 * rng.standard_normal(7),
+        tau_J=rng.standard_normal(7),
+        external_force=rng.standard_normal(6),
+        ft_force=np.array([4.0 * np.sin(t), 3.0, 1.0]),
+        ft_torque=0.01 * rng.standard_normal(3),
+        tactile=np.full(64, 62.5),
+        instruments=np.array([[480.0 + 50 * np.sin(t), 300.0], [150.0, 200.0]]),
+        wrenches={name: rng.standard_normal(6) for name in ("rcm", "interaction", "tracking", "viscous")},
+        mode="handle+tracking",
+        delta=1.13,
+        contacts=64,
+        p_R=np.array([0.45, 0.0, 0.25]),
+        e_R=1e-4 * rng.standard_normal(3),
+        rcm_error=1e-4,
+        rcm_error_measured=1.2e-4,
+        q_ref=q + 1e-4,
+        q_cmd=q + 1e-4,
+        supervisor="running",
+        alarm=False,
+        compute_us=120.0,
+        cycle_us=1000.0,
+        p_G=np.array([0.45, 0.0, 0.2]),
+    )
+
+
+def make_record(k: int, rng: np.random.Generator) -> CycleRecord:
+    """Cycle ``k`` as a record."""
+    return CycleRecord(**record_fields(k, rng))
+
+
+@dataclass
+class LoopSamples:
+    """What the paced loop measured (ns): per logged cycle, building the record and handing it
+    over; per cycle, how late it woke up, in blocks with and without logging."""
+
+    build_ns: list[int] = field(default_factory=list)
+    cycle_ns: list[int] = field(default_factory=list)
+    late_on_ns: list[int] = field(default_factory=list)
+    late_off_ns: list[int] = field(default_factory=list)
+
+
+def paced_loop(cycles: int, rate_hz: float, logger: RunLogger, block: int = 500) -> LoopSamples:
+    """``cycles`` logged cycles at ``rate_hz`` in blocks of ``block``, each followed by a block
+    without logging (the writer idles): the lateness of both kinds of block, side by side, so
+    load from other processes affects both alike. A stall longer than a period is counted once
+    (the loop restarts its clock instead of running late cycles back to back)."""
+    rng = np.random.default_rng(0)
+    clock = time.perf_counter_ns
+    period = round(1e9 / rate_hz)
+    out = LoopSamples()
+    deadline = clock() + period
+    for k in range(2 * cycles):
+        logging = (k // block) % 2 == 0
+        pause = deadline - clock()
+        if pause > 0:
+            time.sleep(pause / 1e9)
+        now = clock()
+        (out.late_on_ns if logging else out.late_off_ns).append(now - deadline)
+        deadline = max(deadline, now - period) + period
+        if not logging:
+            continue
+        fields = record_fields(len(out.cycle_ns), rng)
+        t0 = clock()
+        rec = CycleRecord(**fields)
+        t1 = clock()
+        logger.cycle(rec)
+        t2 = clock()
+        out.build_ns.append(t1 - t0)
+        out.cycle_ns.append(t2 - t1)
+    return out
+
+
+def time_calls(n: int, fn: Callable[[int], Any]) -> list[int]:
+    """Durations (ns) of ``fn(k)`` for k < n, after 200 warm-up calls."""
+    clock = time.perf_counter_ns
+    for k in range(200):
+        fn(k)
+    out = []
+    for k in range(n):
+        t0 = clock()
+        fn(k)
+        out.append(clock() - t0)
+    return out
+
+
+@dataclass
+class References:
+    """Durations (ns) of ``encode_cycle`` (the writer's work per record), ``decode_cycle``,
+    ``json.dumps(record.to_dict())`` and ``computeAllTerms`` (Panda), and the message size."""
+
+    encode_ns: list[int]
+    decode_ns: list[int]
+    json_ns: list[int]
+    cat_ns: list[int]
+    message_bytes: float
+
+
+def references(cycles: int) -> References:
+    """The per-record references, on ``cycles`` calls each."""
+    rng = np.random.default_rng(1)
+    records = [make_record(k, rng) for k in range(min(cycles, 2000))]
+    encode_ns = time_calls(cycles, lambda k: encode_cycle(records[k % len(records)]))
+    messages = [encode_cycle(r) for r in records]
+    decode_ns = time_calls(cycles, lambda k: decode_cycle(messages[k % len(messages)]))
+    json_ns = time_calls(cycles, lambda k: json.dumps(records[k % len(records)].to_dict()))
+    model = RobotModel("panda")
+    m, d = model.model, model.model.createData()
+    v = 0.1 * np.ones(7)
+    cat_ns = time_calls(cycles, lambda k: pin.computeAllTerms(m, d, Q0, v))
+    return References(encode_ns, decode_ns, json_ns, cat_ns, float(np.mean([len(b) for b in messages])))
+
+
+def print_references(ref: References) -> dict[str, float]:
+    """The reference lines; their figures for the JSON line."""
+    e50, e99 = percentiles_us(ref.encode_ns)
+    d50, d99 = percentiles_us(ref.decode_ns)
+    j50, j99 = percentiles_us(ref.json_ns)
+    a50, a99 = percentiles_us(ref.cat_ns)
+    print(f"encode_cycle (writer)  p50 {e50:8.2f} us   p99 {e99:8.2f} us   (the writer thread's work per record)")
+    print(f"decode_cycle (reader)  p50 {d50:8.2f} us   p99 {d99:8.2f} us   ({ref.message_bytes:.0f} bytes a message)")
+    print(f"json.dumps(to_dict())  p50 {j50:8.2f} us   p99 {j99:8.2f} us   (reference: a JSON logger's work)")
+    print(f"computeAllTerms        p50 {a50:8.2f} us   p99 {a99:8.2f} us   (reference)")
+    return {
+        "writer_encode_cycle_p50_us": round(e50, 3),
+        "writer_encode_cycle_p99_us": round(e99, 3),
+        "reader_decode_cycle_p50_us": round(d50, 3),
+        "reader_decode_cycle_p99_us": round(d99, 3),
+        "cycle_message_bytes": round(ref.message_bytes, 1),
+        "ref_json_dumps_p50_us": round(j50, 3),
+        "ref_json_dumps_p99_us": round(j99, 3),
+        "ref_compute_all_terms_p50_us": round(a50, 3),
+        "ref_compute_all_terms_p99_us": round(a99, 3),
+    }
+
+
+def drain_throughput(folder: Path, model: RobotModel | None) -> float:
+    """Records per second the writer sustains: ``capacity`` records handed at once, then drained."""
+    rng = np.random.default_rng(2)
+    records = [make_record(k, rng) for k in range(CYCLE_CAPACITY)]
+    logger = RunLogger(folder / "drain.mcap", {"bench": "drain"}, model=model)
+    t0 = time.perf_counter()
+    for r in records:
+        logger.cycle(r)
+    logger.close()
+    return len(records) / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cycles", type=int, default=10000)
+    ap.add_argument("--rate", type=float, default=1000.0, help="loop rate (Hz)")
+    ap.add_argument("--no-model", action="store_true", help="no robot model: no frame transforms")
+    ap.add_argument("--encode-only", action="store_true", help="the per-record references only (step 2)")
+    args = ap.parse_args()
+    if args.cycles < 1000:
+        ap.error("--cycles must be at least 1000")
+    if args.encode_only:
+        print(f"records: {args.cycles}")
+        print(json.dumps({"cycles": args.cycles} | print_references(references(args.cycles))))
+        return
+    model = None if args.no_model else RobotModel("panda")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        logger = RunLogger(folder / "bench.mcap", {"bench": "log"}, model=model)
+        loop = paced_loop(args.cycles, args.rate, logger)
+        logger.close()
+        stats = logger.stats()
+        written = len(read_log(folder / "bench.mcap")[0])
+        size_mb = (folder / "bench.mcap").stat().st_size / 1e6
+        ref = references(args.cycles)
+        throughput = drain_throughput(folder, model)
+    c50, c99 = percentiles_us(loop.cycle_ns)
+    cmax = max(loop.cycle_ns) / 1e3
+    b50, b99 = percentiles_us(loop.build_ns)
+    bc50, bc99 = percentiles_us(np.add(loop.build_ns, loop.cycle_ns))
+    l50, l99 = percentiles_us(loop.late_on_ns)
+    lr50, lr99 = percentiles_us(loop.late_off_ns)
+    lmax, lrmax = max(loop.late_on_ns) / 1e3, max(loop.late_off_ns) / 1e3
+    j50, j99 = percentiles_us(ref.json_ns)
+    a50, a99 = percentiles_us(ref.cat_ns)
+    print(f"cycles: {args.cycles} logged at {args.rate:.0f} Hz, model: {'none' if model is None else 'panda'}")
+    print(f"RunLogger.cycle        p50 {c50:8.2f} us   p99 {c99:8.2f} us   max {cmax:8.1f} us   (target <= 20 us)")
+    print(f"CycleRecord(...)       p50 {b50:8.2f} us   p99 {b99:8.2f} us")
+    print(f"record + cycle         p50 {bc50:8.2f} us   p99 {bc99:8.2f} us")
+    figures = print_references(ref)
+    print(f"ratio cycle/json       p50 {c50 / j50:8.3f} x    p99 {c99 / j99:8.3f} x")
+    print(f"ratio cycle/CAT        p50 {c50 / a50:8.3f} x    p99 {c99 / a99:8.3f} x")
+    print(f"wake-up lateness, logging blocks   p50 {l50:7.1f} us   p99 {l99:7.1f} us   max {lmax:8.1f} us")
+    print(f"wake-up lateness, idle blocks      p50 {lr50:7.1f} us   p99 {lr99:7.1f} us   max {lrmax:8.1f} us")
+    print(
+        f"written {written} cycles, {stats['transforms']} transform sets, dropped {stats['dropped']}, "
+        f"errors {stats['errors']}, file {size_mb:.1f} MB"
+    )
+    print(f"writer drain throughput {throughput:8.0f} records/s ({throughput / args.rate:.1f}x the loop rate)")
+    print(
+        json.dumps(
+            {
+                "cycles": args.cycles,
+                "rate_hz": args.rate,
+                "log_cycle_p50_us": round(c50, 3),
+                "log_cycle_p99_us": round(c99, 3),
+                "log_cycle_max_us": round(cmax, 3),
+                "record_build_p99_us": round(b99, 3),
+                "record_and_cycle_p99_us": round(bc99, 3),
+                **figures,
+                "cycle_over_json_p99_x": round(c99 / j99, 4),
+                "cycle_over_cat_p99_x": round(c99 / a99, 4),
+                "wake_late_p99_us": round(l99, 1),
+                "wake_late_max_us": round(lmax, 1),
+                "ref_wake_late_idle_p99_us": round(lr99, 1),
+                "ref_wake_late_idle_max_us": round(lrmax, 1),
+                "writer_drain_records_per_s": round(throughput),
+                "written": written,
+                "transforms": stats["transforms"],
+                "dropped": stats["dropped"],
+                "errors": stats["errors"],
+                "file_mb": round(size_mb, 2),
+            }
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,96 @@
+"""What the loop hands to the logger each cycle, and that record as plain values (lists, floats,
+``None`` for NaN/inf and absent values): what :func:`~lapwrench.hardware.log.read_log` gives back."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+def plain_list(x: Any) -> Any:
+    """An array (any shape) as nested lists, NaN/inf as ``None``; ``None`` stays ``None``."""
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=float)
+    finite = np.isfinite(a)
+    if finite.all():
+        return a.tolist()
+    return np.where(finite, a, None).tolist()
+
+
+def plain_float(x: Any) -> float | None:
+    """A float, or ``None`` for NaN/inf/None."""
+    if x is None:
+        return None
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+@dataclass(slots=True)
+class CycleRecord:
+    """What the loop hands to the logger each cycle (references; serialised in the writer thread).
+
+    ``p_G`` (the closest point, m in {B}) is optional: with it the log has the G frame and the
+    null-space wrench arrows at G.
+    """
+
+    t: float
+    robot_time: float
+    k: int
+    q: Any
+    dq: Any
+    tau_J: Any
+    external_force: Any
+    ft_force: Any
+    ft_torque: Any
+    tactile: Any
+    instruments: Any
+    wrenches: dict[str, Any]
+    mode: str
+    delta: float
+    contacts: int
+    p_R: Any
+    e_R: Any
+    rcm_error: float
+    rcm_error_measured: float | None
+    q_ref: Any
+    q_cmd: Any
+    supervisor: str
+    alarm: bool
+    compute_us: float
+    cycle_us: float
+    p_G: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The record as :func:`~lapwrench.hardware.log.read_log` gives it back (lists; NaN/inf → ``None``)."""
+        return {
+            "t": plain_float(self.t),
+            "robot_time": plain_float(self.robot_time),
+            "k": int(self.k),
+            "q": plain_list(self.q),
+            "dq": plain_list(self.dq),
+            "tau_J": plain_list(self.tau_J),
+            "external_force": plain_list(self.external_force),
+            "ft_force": plain_list(self.ft_force),
+            "ft_torque": plain_list(self.ft_torque),
+            "tactile": plain_list(self.tactile),
+            "instruments": plain_list(self.instruments),
+            "wrenches": {str(k): plain_list(v) for k, v in self.wrenches.items()},
+            "mode": str(self.mode),
+            "delta": plain_float(self.delta),
+            "contacts": int(self.contacts),
+            "p_R": plain_list(self.p_R),
+            "p_G": plain_list(self.p_G),
+            "e_R": plain_list(self.e_R),
+            "rcm_error": plain_float(self.rcm_error),
+            "rcm_error_measured": plain_float(self.rcm_error_measured),
+            "q_ref": plain_list(self.q_ref),
+            "q_cmd": plain_list(self.q_cmd),
+            "supervisor": str(self.supervisor),
+            "alarm": bool(self.alarm),
+            "compute_us": plain_float(self.compute_us),
+            "cycle_us": plain_float(self.cycle_us),
+        }
