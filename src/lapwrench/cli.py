@@ -110,6 +110,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             time_scale=args.time_scale,
             video=not args.no_video,
             detector=args.detector,
+            workers=args.workers,
         )
         results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:
@@ -143,6 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
         default="shipped",
         help="instrument detector on the rendered frames: shipped (YOLO ONNX), classical, a .onnx/.pt "
         "model, or projected (simulator geometry, no detector)",
+    )
+    demo.add_argument(
+        "--workers", type=int, default=None,
+        help="processes running scenarios side by side (default: the CPU count, at most 4; 1: in this process)",
     )
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
 

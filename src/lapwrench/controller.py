@@ -8,8 +8,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -53,8 +52,9 @@ def classify_mode(handle_engaged: bool, tracking_engaged: bool, handle_force: fl
     return "tracking" if tracking_engaged else "idle"
 
 
-@dataclass(frozen=True)
-class TickResult:
+class TickResult(NamedTuple):
+    """What one tick produced (a named tuple: built every millisecond, it must be cheap)."""
+
     time: float
     q_ref: Vec
     dq_ref: Vec
@@ -72,11 +72,12 @@ class TickResult:
     residual: Vec | None = None  # ΔF (eq 19) in {B}, N; None when the F/T or the force estimate is missing
     limits_active: tuple[str, ...] = ()  # constraints saturated this tick: "joint3", "depth_max", "pivot_speed", ...
     rcm_infeasible: bool = False  # the RCM task could not be kept inside the limits: the controller is stopping
-    events: list[InputEvent] = field(default_factory=list)
+    events: tuple[InputEvent, ...] | list[InputEvent] = ()
 
     @property
     def rcm_error(self) -> float:
-        return float(np.linalg.norm(self.e_R))
+        e = self.e_R
+        return math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
 
 
 class Controller:

@@ -15,13 +15,12 @@ import numpy as np
 
 from lapwrench.config import CameraConfig, Config
 from lapwrench.controller import Controller, TickResult
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.loop import ControlLoop
+from lapwrench.robot.description import RobotKind
 from lapwrench.robot.limits import limit_usage
-from lapwrench.sensors import (
-    ForceTorqueReading,
-    InstrumentObservation,
-    SensorFrame,
-    TactileReading,
-)
+from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading
+from lapwrench.sources import Observable, Source
 from lapwrench.spatial import Mat, Vec
 
 # Scope pointing straight down, arm comfortably inside its limits (Panda and FR3).
@@ -62,9 +61,40 @@ class VirtualLog:
     results: list[TickResult] = field(default_factory=list)
     pixels: list[Vec] = field(default_factory=list)
     axis_points: list[tuple[Vec, Vec]] = field(default_factory=list)
+    alarm: str | None = None  # the supervisor's alarm that ended the run early, if any
 
     def array(self, name: str) -> np.ndarray:
         return np.array([getattr(r, name) for r in self.results])
+
+
+class VirtualRobot:
+    """The controller's virtual model as the robot: it is exactly where it was commanded.
+
+    A :class:`~lapwrench.robot.interface.RobotInterface`: ``read`` returns the last command as the
+    measured position, its difference over one period as the velocity, and no force estimate.
+    """
+
+    def __init__(self, kind: RobotKind, q0: Vec, dt: float) -> None:
+        self.kind: RobotKind = kind
+        self.dt = dt
+        self.q = np.array(q0, dtype=float)
+        self.dq = np.zeros_like(self.q)
+        self.t = 0.0
+
+    def connect(self) -> RobotReading:
+        return RobotReading(self.q.copy(), self.dq.copy(), None, self.t)
+
+    def read(self) -> RobotReading:
+        return RobotReading(self.q.copy(), self.dq.copy(), None, self.t)
+
+    def command(self, q_ref: Vec) -> None:
+        q = np.asarray(q_ref, dtype=float)
+        self.dq = (q - self.q) / self.dt
+        self.q = q.copy()
+        self.t += self.dt
+
+    def disconnect(self) -> None:
+        """Nothing to release."""
 
 
 def run_virtual(
@@ -77,29 +107,51 @@ def run_virtual(
     controller: Controller | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[Controller, VirtualLog]:
-    """Run the controller in closed loop on its virtual model for ``duration`` seconds."""
+    """Run the controller for ``duration`` seconds through the one control loop
+    (:class:`lapwrench.loop.ControlLoop`) on its own virtual model (:class:`VirtualRobot`), with the
+    safety supervisor in the path. A supervisor alarm ends the run (the arm stopped to rest first);
+    ``VirtualLog.alarm`` says why.
+    """
     ctrl = controller or Controller(cfg)
-    ctrl.reset(q0, p_R)
     hand = hand or HandScript()
     log = VirtualLog()
     dt = cfg.robot.dt
+    robot = VirtualRobot(cfg.robot.kind, q0, dt)
+    clock = [0.0]
+    pixels = [np.zeros((0, 2))]
+
+    def observe(t: float) -> InstrumentObservation | None:
+        if instruments is None:
+            return None
+        kin = ctrl.model.kinematics(robot.q, robot.dq)
+        uv, vis = project_points(instruments(t), kin.p_C, kin.R_C, cfg.camera)
+        pixels[0] = uv[vis]
+        return InstrumentObservation(pixels[0], t)
+
+    sources: list[Source] = [
+        Observable("ft", lambda t: ForceTorqueReading(hand.force(t), hand.torque(t), t), update_interval=dt,
+                   max_age=dt),
+        Observable("tactile", lambda t: TactileReading(tactile_for_delta(hand.delta(t), cfg.interaction.k_H), t),
+                   update_interval=dt, max_age=dt),
+    ]
+    if instruments is not None:
+        sources.append(Observable("instruments", observe, update_interval=dt, max_age=dt))
+    sup = SafetySupervisor(ctrl.model.limits, dt, SupervisorConfig.from_config(cfg, max_consecutive_misses=0))
+    loop = ControlLoop(robot, ctrl, sup, sources, clock=lambda: clock[0], wall_deadlines=False, switch_interval=None)
+    loop.start(p_R)
     steps = round(duration / dt)
-    kin = ctrl.model.kinematics(ctrl.ref.q, ctrl.ref.dq)  # type: ignore[union-attr]
     for k in range(steps):
-        t = k * dt
-        ft = ForceTorqueReading(hand.force(t), hand.torque(t), t)
-        tactile = TactileReading(tactile_for_delta(hand.delta(t), cfg.interaction.k_H), t)
-        obs = None
-        uv = np.zeros((0, 2))
-        if instruments is not None:
-            uv, vis = project_points(instruments(t), kin.p_C, kin.R_C, cfg.camera)
-            uv = uv[vis]
-            obs = InstrumentObservation(uv, t)
-        res = ctrl.tick(SensorFrame(t, ft, tactile, obs))
-        kin = ctrl.model.kinematics(res.q_ref, res.dq_ref)
-        log.t.append(t)
-        log.results.append(res)
-        log.pixels.append(uv)
+        c = loop.cycle()
+        clock[0] += dt
+        if c.result is None or sup.alarm:
+            log.alarm = sup.alarm_reason
+            while not sup.at_rest and loop.k < 10 * steps + 10_000:
+                loop.hold_cycle()
+            break
+        kin = ctrl.model.kinematics(robot.q, robot.dq)
+        log.t.append(c.frame.time)
+        log.results.append(c.result)
+        log.pixels.append(pixels[0])
         log.axis_points.append((kin.p_E.copy(), kin.p_E + cfg.scope.length * kin.d_z))
         if progress is not None:
             progress(k, steps)

@@ -9,12 +9,16 @@ report.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 import platform
 import shutil
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
+from queue import Empty
+from typing import Any
 
 import mujoco
 
@@ -43,6 +47,7 @@ class DemoPlan:
     video: bool
     printed_damping_check: bool
     detector: str = "shipped"
+    workers: int = 1  # scenarios run on this many processes (each scenario is seeded: same results)
 
 
 def plan_demo(
@@ -55,8 +60,13 @@ def plan_demo(
     video: bool = True,
     printed_damping_check: bool = True,
     detector: str = "shipped",
+    workers: int | None = None,
 ) -> DemoPlan:
     """Validate everything (names, configs, output folder) and return the plan."""
+    if workers is None:
+        workers = min(4, os.cpu_count() or 1)
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 64:
+        raise DemoError(f"workers must be a whole number from 1 to 64, got {workers!r}")
     names = tuple(scenarios or SCENARIOS)
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
@@ -94,7 +104,96 @@ def plan_demo(
         video,
         printed_damping_check and config is None and any(n in TRACKING_SCENARIOS for n in names),
         detector,
+        workers,
     )
+
+
+PRINTED_DAMPING = "needle-search, printed damping"
+
+
+def _init_worker(queue: Any) -> None:
+    global _PROGRESS
+    _PROGRESS = queue
+
+
+_PROGRESS: Any = None
+
+
+def _task(name: str, plan: DemoPlan) -> tuple[str, ScenarioResult | str, str | None]:
+    """One scenario (or the printed-damping check) in a worker: (name, result or check text, error)."""
+
+    def progress(dt: float) -> None:
+        if _PROGRESS is not None:
+            _PROGRESS.put(dt)
+
+    opts = ScenarioOptions(
+        seed=plan.seed,
+        time_scale=plan.time_scale,
+        progress=progress,
+        video_dir=plan.out if plan.video and name in TRACKING_SCENARIOS else None,
+        detector=plan.detector,
+    )
+    try:
+        if name == PRINTED_DAMPING:
+            return name, _printed_damping_check(opts), None
+        return name, SCENARIOS[name](plan.configs[name], opts), None
+    except (SimulationUnstableError, SafetyStopError) as exc:
+        return name, "", f"simulation of '{name}' stopped: {exc}. No report was written."
+
+
+def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, ScenarioResult | str]:
+    """Run the tasks on ``plan.workers`` processes (longest first), or in this process with one worker."""
+    global _PROGRESS
+    out: dict[str, ScenarioResult | str] = {}
+    if plan.workers <= 1:
+        _PROGRESS = _BarFeed(bar)
+        try:
+            for name in names:
+                bar.set_postfix_str(name)
+                _, res, err = _task(name, plan)
+                if err:
+                    raise DemoError(err)
+                out[name] = res
+        finally:
+            _PROGRESS = None
+        return out
+    ctx = mp.get_context("spawn")  # no fork of a process holding MuJoCo/EGL and numba state
+    queue = ctx.Queue()
+    with ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)) as pool:
+        order = sorted(names, key=lambda n: -SIM_SECONDS.get(n, 15.0))
+        pending = {pool.submit(_task, n, plan) for n in order}
+        bar.set_postfix_str(f"{plan.workers} workers")
+        while pending:
+            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+            _drain(queue, bar)
+            for f in done:
+                name, res, err = f.result()
+                if err:
+                    for p in pending:
+                        p.cancel()
+                    raise DemoError(err)
+                out[name] = res
+        _drain(queue, bar)
+    return out
+
+
+class _BarFeed:
+    """The progress queue of the one-process case: updates the bar directly."""
+
+    def __init__(self, bar: Any) -> None:
+        self.bar = bar
+
+    def put(self, dt: float) -> None:
+        self.bar.update(max(0.0, min(dt, self.bar.total - self.bar.n)))
+
+
+def _drain(queue: Any, bar: Any) -> None:
+    feed = _BarFeed(bar)
+    while True:
+        try:
+            feed.put(queue.get_nowait())
+        except Empty:
+            return
 
 
 def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]:
@@ -117,37 +216,19 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         mininterval=1.0,
         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}{postfix}]",
     )
-    results: dict[str, ScenarioResult] = {}
-    figures: dict[str, list[str]] = {}
     t0 = time.perf_counter()
-    done = 0.0
-    opts_video = out if plan.video else None
+    names = list(plan.scenarios) + ([PRINTED_DAMPING] if plan.printed_damping_check else [])
     try:
-        for name in plan.scenarios:
-            bar.set_postfix_str(name)
-            cap = done + SIM_SECONDS[name] * plan.time_scale
-            opts = ScenarioOptions(
-                seed=plan.seed,
-                time_scale=plan.time_scale,
-                progress=lambda dt, cap=cap: bar.update(max(0.0, min(dt, cap - bar.n))),
-                video_dir=opts_video if name in TRACKING_SCENARIOS else None,
-                detector=plan.detector,
-            )
-            res = SCENARIOS[name](plan.configs[name], opts)
-            done = cap
-            bar.update(max(0.0, done - bar.n))
-            results[name] = res
-            figures[name] = _plots(name, res, out, plan.configs[name])
-        check = None
-        if plan.printed_damping_check:
-            bar.set_postfix_str("needle-search, printed damping")
-            check = _printed_damping_check(plan, bar)
-    except (SimulationUnstableError, SafetyStopError) as exc:
+        done = _run_tasks(plan, names, bar)
+    except DemoError as exc:
         bar.close()
-        msg = f"simulation of '{name}' stopped: {exc}. No report was written."
-        (out / "FAILED.txt").write_text(msg + "\n")
-        raise DemoError(msg) from exc
+        (out / "FAILED.txt").write_text(f"{exc}\n")
+        raise
+    bar.update(max(0.0, bar.total - bar.n))
     bar.close()
+    results = {n: done[n] for n in plan.scenarios}
+    figures = {n: _plots(n, r, out, plan.configs[n]) for n, r in results.items()}  # type: ignore[arg-type]
+    check = done.get(PRINTED_DAMPING)
     wall = time.perf_counter() - t0
     meta = {
         "lapwrench": __version__,
@@ -159,14 +240,15 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         "physics_dt_ms": 0.5,
         "config_sources": plan.config_sources,
         "wall_s": wall,
-        "sim_s": sum(sum(float(r.metrics["duration_s"]) for r in res.runs) for res in results.values()),
-        "instrument_source": _instrument_sources(results),
+        "workers": plan.workers,
+        "sim_s": sum(sum(float(r.metrics["duration_s"]) for r in res.runs) for res in results.values()),  # type: ignore[union-attr]
+        "instrument_source": _instrument_sources(results),  # type: ignore[arg-type]
         "printed_damping_check": check,
         "notes": _notes(plan),
     }
-    report.write_metrics(out, results, meta)
-    report.write_report(out, results, meta, figures)
-    return results
+    report.write_metrics(out, results, meta)  # type: ignore[arg-type]
+    report.write_report(out, results, meta, figures)  # type: ignore[arg-type]
+    return results  # type: ignore[return-value]
 
 
 def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
@@ -185,17 +267,10 @@ def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) ->
     return figs
 
 
-def _printed_damping_check(plan: DemoPlan, bar: object) -> str:
+def _printed_damping_check(opts: ScenarioOptions) -> str:
     """Needle search with the damping table exactly as printed (one k_t for every cue, k_f = 2), to
     show why the defaults depart from it."""
     cfg = config_mod.load().replace(viscous={"k_f": 2.0, "k_t_unguided": 150.0})
-    cap = bar.total  # type: ignore[attr-defined]
-    opts = ScenarioOptions(
-        seed=plan.seed,
-        time_scale=plan.time_scale,
-        progress=lambda dt: bar.update(max(0.0, min(dt, cap - bar.n))),  # type: ignore[attr-defined]
-        detector=plan.detector,
-    )
     try:
         res = needle_search(cfg, opts)
     except SimulationUnstableError as exc:

@@ -15,11 +15,12 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, measure_scope
+from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.loop import ControlLoop
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.model import RobotModel
-from lapwrench.sensors import InstrumentObservation, RobotReading, SensorFrame
+from lapwrench.sensors import InstrumentObservation
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 from lapwrench.sim.scene import SceneConfig, build_scene
 from lapwrench.sim.sensors import (
@@ -28,6 +29,7 @@ from lapwrench.sim.sensors import (
     TactileGripModel,
 )
 from lapwrench.sim.world import CONTROL_DT, SimWorld
+from lapwrench.sources import Observable, Source
 
 # Modelled capture-to-use delay of a detection (s): one frame period at 25 fps. The shipped model's
 # inference (two passes) is 9 ms in bench/detect.py and about 17 ms inside the simulated loop
@@ -120,7 +122,8 @@ class Trace:
 
 
 class ClosedLoop:
-    """The world, its sensors and the controller, stepped together."""
+    """The world, its sensors and the controller, stepped together through the one control loop
+    (:class:`lapwrench.loop.ControlLoop`) on the simulated robot and simulated sources."""
 
     def __init__(
         self,
@@ -147,7 +150,7 @@ class ClosedLoop:
         self.robot = SimRobot(
             self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=s_obs)
         )
-        # the same measured-state bounds as on the robot; no deadline watch (simulated time)
+        # the same measured-state bounds as on the robot; compute time measured, no wall-clock deadline
         self.supervisor = SafetySupervisor(
             self.model.limits, CONTROL_DT, SupervisorConfig.from_config(cfg, max_consecutive_misses=0)
         )
@@ -160,12 +163,30 @@ class ClosedLoop:
         self.on_frame = on_frame
         self.last_mode = "idle"
         self.ft.tare()
-        self._reading = self.robot.connect()
-        self.q0 = self._reading.q
-        self.controller.reset(self.q0)
-        self.supervisor.start(self.q0)
-        self.events: list[object] = []
+        self.grip_force = 0.0
         self.t = 0.0
+        self.loop = ControlLoop(
+            self.robot, self.controller, self.supervisor, self._sources(), clock=lambda: self.t,
+            wall_deadlines=False, switch_interval=None,
+        )
+        self._reading = self.loop.start()
+        self.q0 = self._reading.q
+        self.events: list[object] = []
+        self.compute_us: list[float] = []
+
+    def _sources(self) -> list[Source]:
+        """The controller's inputs, each a simulated source sampled every control period (their own
+        models hold the sensors' rates, noise and latency)."""
+        ages = self.cfg.inputs
+        out: list[Source] = [
+            Observable("ft", self.ft.read, update_interval=CONTROL_DT, max_age=0.02),
+            Observable("tactile", lambda t: self.tactile.read(t, self.grip_force), update_interval=CONTROL_DT,
+                       max_age=0.1),
+        ]
+        if self.detection is not None:
+            out.append(Observable("instruments", self._observation, update_interval=CONTROL_DT,
+                                  max_age=ages.max_image_age))
+        return out
 
     @property
     def time(self) -> float:
@@ -196,7 +217,8 @@ class ClosedLoop:
         return None if self.detection is None else self.detection.observation(t)
 
     def step(self, grip_force: float, before_physics: Callable[[float], None] | None = None) -> TickResult:
-        """One 1 ms tick: sensors → controller → supervisor → robot. The hand wrench must already be set.
+        """One 1 ms cycle of the control loop: sensors → controller → supervisor → robot. The hand
+        wrench must already be set.
 
         The supervisor watches *measured* state only: the RCM error and the insertion depth at the
         joints the robot reads (:func:`~lapwrench.hardware.supervisor.measure_scope`, for the
@@ -210,55 +232,28 @@ class ClosedLoop:
         """
         t = self.t
         self._camera_step(t)
-        reading = self.robot.read() if t > 0.0 else self._reading
-        frame = SensorFrame(
-            time=t,
-            ft=self.ft.read(t),
-            tactile=self.tactile.read(t, grip_force),
-            instruments=self._observation(t),
-            robot=RobotReading(reading.q, reading.dq, reading.external_force, t),
-        )
-        sup = self.supervisor
-        result: TickResult | None = None
-        try:
-            result = self.controller.tick(frame)
-        except Exception as exc:  # never a crash: hold through the supervisor
-            sup.raise_alarm(t, "controller_error", f"{type(exc).__name__}: {exc}")
-        if result is not None:
-            self.last_mode = result.mode
-            q_ref, p_R, residual = result.q_ref, result.p_R, result.residual
-        else:
-            q_ref, p_R, residual = reading.q, self.controller.rcm.p_R, None  # type: ignore[union-attr]
-        measured = measure_scope(self.model, reading.q, p_R)
-        q_cmd = sup.filter(
-            t,
-            q_ref,
-            rcm_error=measured.rcm_error,
-            depth=measured.depth,
-            residual=residual,
-            q_measured=reading.q,
-            controller_stopping=result is not None and result.rcm_infeasible,
-        )
-        self.events.extend(sup.drain_events())
-        if before_physics is not None:
-            before_physics(t)
-        self.robot.command(q_cmd)
+        self.grip_force = grip_force
+        self.loop.before_command = before_physics
+        c = self.loop.cycle()
+        self.events.extend(c.events)
+        self.compute_us.append(c.compute * 1e6)
+        if c.result is not None:
+            self.last_mode = c.result.mode
         self.t = t + CONTROL_DT
-        if sup.alarm:
+        if self.supervisor.alarm:
             self._stop_to_rest()
-            raise SafetyStopError(t, sup.alarm_reason)
-        assert result is not None  # a failed tick raised the alarm above
-        return result
+            raise SafetyStopError(t, self.supervisor.alarm_reason)
+        assert c.result is not None  # a failed tick raised the alarm above
+        return c.result
 
     def _stop_to_rest(self) -> None:
         """After an alarm: keep sending the supervisor's jerk-limited stop until the arm is at rest."""
+        self.loop.on_events = self.events.extend
         for _ in range(10_000):
             if self.supervisor.at_rest:
                 break
-            reading = self.robot.read()
-            self.robot.command(self.supervisor.filter(self.t, reading.q, q_measured=reading.q))
+            self.loop.hold_cycle()
             self.t += CONTROL_DT
-        self.events.extend(self.supervisor.drain_events())
 
     def physical_rcm_error(self) -> float:
         """Distance (m) from the unloaded incision point (where the wall would sit with no shaft

@@ -1,0 +1,423 @@
+"""The one control loop: robot state + fresh sensor samples → controller → supervisor → robot.
+
+The same loop drives the controller's virtual model (:class:`lapwrench.virtual.VirtualRobot`), the
+MuJoCo world (:class:`lapwrench.sim.robot.SimRobot`) and the Franka
+(:class:`lapwrench.hardware.franka.FrankaRobot`); what differs lives behind the
+:class:`~lapwrench.robot.interface.RobotInterface` and the :class:`~lapwrench.sources.Source` s.
+
+One cycle (:meth:`ControlLoop.cycle`)::
+
+    reading = robot.read()                 # on hardware: waits for the robot's next state (1 ms)
+    sources polled; frame = SensorFrame(fresh readings, reading)
+    result  = controller.tick(frame)       # an exception here is an alarm: the arm stops to rest
+    scope   = measure_scope(model, reading.q, result.p_R)
+    q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
+    robot.command(q)
+
+The supervisor watches measured state only (:mod:`lapwrench.hardware.supervisor`).
+
+Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is
+``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
+the compute time of every cycle is checked against the supervisor's budget (deadline misses,
+and an alarm after too many in a row). In simulation the clock is the simulated time: the
+simulated robot waits for the loop, so the compute time is measured and reported but has no
+deadline (``wall_deadlines=False``).
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from lapwrench.controller import Controller, TickResult
+from lapwrench.hardware.supervisor import MeasuredScope, SafetySupervisor, SupervisorEvent, measure_scope
+from lapwrench.robot.interface import RobotError, RobotInterface
+from lapwrench.sensors import RobotReading, SensorFrame
+from lapwrench.sources import Source, fresh
+from lapwrench.spatial import Vec
+
+
+@dataclass
+class LoopStats:
+    """What a run measured. Times in microseconds; ``cycle_us`` is the period between reads."""
+
+    cycles: int = 0
+    cycle_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    compute_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rcm_error_measured: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rcm_error_reference: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    commands: np.ndarray = field(default_factory=lambda: np.zeros((0, 7)))
+    q_start: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    p_R: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    robot_time: float = 0.0
+    wall_time: float = 0.0
+    deadline_misses: int = 0
+    over_budget: int = 0  # cycles whose compute time exceeded the budget (counted with or without deadlines)
+    alarm: str | None = None
+    stopped_at_rest: bool = False
+
+    def percentile(self, what: Literal["cycle", "compute"], p: float) -> float:
+        a = self.cycle_us if what == "cycle" else self.compute_us
+        return float(np.percentile(a, p)) if a.size else float("nan")
+
+    def summary(self) -> dict[str, float | int | str | bool | None]:
+        """The run's figures with units in the key names (for the CLI, the reports and the benchmarks)."""
+        return {
+            "robot_time_s": round(self.robot_time, 3),
+            "wall_time_s": round(self.wall_time, 3),
+            "cycles": self.cycles,
+            "cycle_p50_us": round(self.percentile("cycle", 50), 1),
+            "cycle_p99_us": round(self.percentile("cycle", 99), 1),
+            "compute_p50_us": round(self.percentile("compute", 50), 1),
+            "compute_p99_us": round(self.percentile("compute", 99), 1),
+            "deadline_misses": self.deadline_misses,
+            "over_budget_cycles": self.over_budget,
+            "rcm_error_measured_max_mm": round(float(self.rcm_error_measured.max()) * 1e3, 4)
+            if self.rcm_error_measured.size
+            else None,
+            "alarm": self.alarm,
+            "stopped_at_rest": self.stopped_at_rest,
+        }
+
+
+class _Growable:
+    """Append-only float array without per-append allocation."""
+
+    def __init__(self, width: int = 0, capacity: int = 16384) -> None:
+        self.n = 0
+        self.a = np.zeros((capacity, width) if width else capacity)
+
+    def append(self, x: Any) -> None:
+        if self.n == self.a.shape[0]:
+            self.a = np.concatenate([self.a, np.zeros_like(self.a)])
+        self.a[self.n] = x
+        self.n += 1
+
+    def array(self) -> np.ndarray:
+        return self.a[: self.n].copy()
+
+
+@dataclass
+class Cycle:
+    """One cycle's outcome: the frame the controller saw, its result (None after a failed tick),
+    the measured scope, the command sent, and the compute time (s)."""
+
+    k: int
+    frame: SensorFrame
+    reading: RobotReading
+    result: TickResult | None
+    scope: MeasuredScope
+    q_cmd: Vec
+    compute: float
+    period: float
+    events: list[SupervisorEvent]  # the supervisor's events of this cycle (drained)
+
+
+class ControlLoop:
+    """Runs the controller on a robot at its control rate (module docstring).
+
+    Args:
+        robot: A :class:`~lapwrench.robot.interface.RobotInterface`.
+        controller: The controller (reset by :meth:`start` at the robot's measured pose).
+        supervisor: The safety supervisor every command passes through.
+        sources: The controller's inputs (:class:`~lapwrench.sources.Source`), at most one per kind.
+        clock: The loop's clock in seconds (default ``time.monotonic``; the simulation passes its time).
+        wall_deadlines: Check each cycle's compute time against the supervisor's budget (real robots).
+        on_cycle: Called with each :class:`Cycle` after the command was sent (logging, recording).
+        on_events: Called with the supervisor's events raised outside a cycle (end of a run,
+            robot errors, disconnection).
+        command_hook: Test seam for fault injection: ``f(k, q_ref) -> q_ref`` replaces the
+            controller's command of cycle ``k`` before the supervisor sees it.
+        compute_hook: Test seam: called with ``k`` inside the measured compute time.
+        pre_cycle: Called with the clock time right after ``robot.read()``, inside the compute time
+            (the real-time process drains the F/T socket and checks its peers there).
+        before_command: Called with the session time just before ``robot.command`` (the simulation
+            applies its scripted forces there).
+        stop_timeout: Robot seconds allowed for the final stop to come to rest.
+        switch_interval: Python's thread switch interval (s) while :meth:`run` runs; None leaves it.
+        gc_freeze: Freeze and disable the cyclic garbage collector for :meth:`run`.
+    """
+
+    def __init__(
+        self,
+        robot: RobotInterface,
+        controller: Controller,
+        supervisor: SafetySupervisor,
+        sources: Sequence[Source] = (),
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        wall_deadlines: bool = True,
+        on_cycle: Callable[[Cycle], None] | None = None,
+        on_events: Callable[[list[SupervisorEvent]], None] | None = None,
+        command_hook: Callable[[int, Vec], Vec] | None = None,
+        compute_hook: Callable[[int], None] | None = None,
+        pre_cycle: Callable[[float], None] | None = None,
+        before_command: Callable[[float], None] | None = None,
+        stop_timeout: float = 5.0,
+        switch_interval: float | None = 1e-4,
+        gc_freeze: bool = False,
+    ) -> None:
+        if switch_interval is not None and not (math.isfinite(switch_interval) and switch_interval > 0):
+            raise ValueError(f"switch_interval must be a positive number of seconds, got {switch_interval!r}")
+        kinds = [s.kind for s in sources]
+        if len(set(kinds)) != len(kinds):
+            raise ValueError(f"at most one source per kind, got {kinds}")
+        self.robot = robot
+        self.controller = controller
+        self.supervisor = supervisor
+        self.sources = list(sources)
+        self.clock = clock
+        self.wall_deadlines = wall_deadlines
+        self.on_cycle = on_cycle
+        self.on_events = on_events
+        self.command_hook = command_hook
+        self.compute_hook = compute_hook
+        self.pre_cycle = pre_cycle
+        self.before_command = before_command
+        self.stop_timeout = stop_timeout
+        self.switch_interval = switch_interval
+        self.gc_freeze = gc_freeze
+        self.t0 = 0.0
+        self.k = 0
+        self.over_budget = 0
+        self._fresh: dict[str, bool] = {}
+        self._t_prev: float | None = None
+        self._controller_failed = False
+        self._started = False
+        self.last_result: TickResult | None = None
+        self.last_reading: RobotReading | None = None
+
+    # -- life cycle ---------------------------------------------------------------------------
+    def session_time(self, now: float | None = None) -> float:
+        return (self.clock() if now is None else now) - self.t0
+
+    def start(self, p_R: Vec | None = None) -> RobotReading:
+        """Connect the robot, reset the controller at its pose and start supervision."""
+        reading = self.robot.connect()
+        self.t0 = self.clock()
+        for s in self.sources:
+            if hasattr(s, "t0"):
+                s.t0 = self.t0  # type: ignore[attr-defined]
+        self.controller.reset(reading.q, p_R)
+        self.supervisor.start(reading.q, 0.0)
+        self._controller_failed = False
+        self.last_reading = reading
+        self._started = True
+        self.k = 0
+        return reading
+
+    # -- one cycle ----------------------------------------------------------------------------
+    def cycle(self) -> Cycle:
+        """Read, compute, supervise, command: one control cycle (module docstring)."""
+        if not self._started:
+            raise RuntimeError("call ControlLoop.start() before cycle()")
+        sup = self.supervisor
+        reading = self.robot.read()
+        t_read = time.perf_counter()
+        now = self.clock()
+        if self.pre_cycle is not None:
+            self.pre_cycle(now)
+        frame = self._frame(now - self.t0, reading)
+        result = self._tick(frame)
+        if result is not None:
+            for ev in result.events:
+                sup.counted_event(frame.time, f"input_{ev.source}", ev.message)
+            q_ref, p_R, residual = result.q_ref, result.p_R, result.residual
+        else:  # the supervisor is stopping on the alarm: it ignores the command
+            assert self.controller.rcm is not None or self.last_result is not None
+            q_ref, p_R, residual = reading.q, self._p_R(), None
+        if self.command_hook is not None:
+            q_ref = self.command_hook(self.k, q_ref)
+        scope = measure_scope(self.controller.model, reading.q, p_R)
+        if self.compute_hook is not None:
+            self.compute_hook(self.k)
+        compute = time.perf_counter() - t_read
+        if compute > sup.cfg.cycle_budget:
+            self.over_budget += 1
+        q_cmd = sup.filter(
+            frame.time,
+            q_ref,
+            rcm_error=scope.rcm_error,
+            depth=scope.depth,
+            residual=residual,
+            q_measured=reading.q,
+            compute_time=compute if self.wall_deadlines else None,
+            controller_stopping=result is not None and result.rcm_infeasible,
+        )
+        if self.before_command is not None:
+            self.before_command(frame.time)
+        self.robot.command(q_cmd)
+        period = 0.0 if self._t_prev is None else t_read - self._t_prev
+        self._t_prev = t_read
+        out = Cycle(self.k, frame, reading, result, scope, q_cmd, compute, period, sup.drain_events())
+        if result is not None:
+            self.last_result = result
+        self.last_reading = reading
+        self.k += 1
+        if self.on_cycle is not None:
+            self.on_cycle(out)
+        return out
+
+    def hold_cycle(self) -> Vec:
+        """One cycle of the supervisor's stop alone (no controller): read, filter the measured pose, command."""
+        reading = self.robot.read()
+        t = self.session_time()
+        q_cmd = self.supervisor.filter(t, reading.q, q_measured=reading.q)
+        self.robot.command(q_cmd)
+        self.flush_events()
+        self.last_reading = reading
+        self.k += 1
+        return q_cmd
+
+    def _p_R(self) -> Vec:
+        rcm = self.controller.rcm
+        if rcm is not None:
+            return rcm.p_R
+        assert self.last_result is not None
+        return self.last_result.p_R
+
+    def _tick(self, frame: SensorFrame) -> TickResult | None:
+        """The controller's tick; an exception becomes a supervisor alarm (None), never a crash.
+
+        After a failed tick the controller is not called again in this run: the supervisor's stop
+        brings the arm to rest.
+        """
+        if self._controller_failed:
+            return None
+        try:
+            return self.controller.tick(frame)
+        except Exception as exc:
+            self._controller_failed = True
+            self.supervisor.raise_alarm(frame.time, "controller_error", f"{type(exc).__name__}: {exc}")
+            return None
+
+    def _frame(self, t: float, reading: RobotReading) -> SensorFrame:
+        readings: dict[str, Any] = {}
+        for s in self.sources:
+            s.poll(t)
+            r = fresh(s, t)
+            self._note_freshness(t, s.kind, r is not None)
+            readings[s.kind] = r
+        return SensorFrame(
+            time=t, ft=readings.get("ft"), tactile=readings.get("tactile"),
+            instruments=readings.get("instruments"), robot=reading,
+        )
+
+    def _note_freshness(self, t: float, name: str, is_fresh: bool) -> None:
+        was = self._fresh.get(name)
+        if was is None or was != is_fresh:
+            self._fresh[name] = is_fresh
+            if not is_fresh:
+                self.supervisor.event(t, "input_stale", f"{name}: no sample newer than the max age; its wrench is off")
+            elif was is not None:
+                self.supervisor.event(t, "input_fresh", f"{name}: fresh again")
+
+    # -- a whole run (hardware) ----------------------------------------------------------------
+    def run(
+        self, duration: float | None = None, stop_event: threading.Event | None = None, *, disconnect: bool = True
+    ) -> LoopStats:
+        """Run until ``duration`` robot seconds, ``stop_event``, or a supervisor alarm; then stop
+        cleanly to rest and (by default) disconnect.
+
+        Sensor threads may share the interpreter with this loop, and pylibfranka's ``readOnce``
+        keeps the GIL while it blocks, so the loop yields the GIL before each ``read`` and shortens
+        the switch interval (100 µs by default). The hardware path runs this loop in a process of
+        its own (:mod:`lapwrench.hardware.rt_process`).
+
+        Raises:
+            RobotError: the robot failed (the loop disconnects before re-raising).
+        """
+        previous_interval = sys.getswitchinterval()
+        if self.switch_interval is not None:
+            sys.setswitchinterval(self.switch_interval)
+        gc_was_enabled = gc.isenabled()
+        if self.gc_freeze:
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+        try:
+            return self._run(duration, stop_event, disconnect)
+        finally:
+            sys.setswitchinterval(previous_interval)
+            if self.gc_freeze:
+                gc.unfreeze()
+                if gc_was_enabled:
+                    gc.enable()
+
+    def _run(self, duration: float | None, stop_event: threading.Event | None, disconnect: bool) -> LoopStats:
+        if not self._started:
+            self.start()
+        sup, dt = self.supervisor, self.robot.dt
+        q_start = np.array(self.last_reading.q if self.last_reading else np.zeros(7))
+        cyc, comp, rm, rr, cmds = _Growable(), _Growable(), _Growable(), _Growable(), _Growable(7)
+        robot_t = 0.0
+        stop_deadline: float | None = None
+        wall0 = time.perf_counter()
+        try:
+            while True:
+                if sup.at_rest and stop_deadline is not None:
+                    break
+                if stop_deadline is None and (
+                    (duration is not None and robot_t >= duration - 1e-9)
+                    or (stop_event is not None and stop_event.is_set())
+                    or sup.state.value != "running"
+                ):
+                    sup.stop(self.session_time(), "end of run" if sup.state.value == "running" else "alarm")
+                    stop_deadline = robot_t + self.stop_timeout
+                if stop_deadline is not None and robot_t > stop_deadline:
+                    sup.event(self.session_time(), "stop_timeout", "the stop did not reach rest in time")
+                    break
+                time.sleep(0)  # let other threads have the GIL before read() holds it
+                c = self.cycle()
+                cyc.append(c.period * 1e6)
+                comp.append(c.compute * 1e6)
+                rm.append(c.scope.rcm_error)
+                rr.append(math.nan if c.result is None else c.result.rcm_error)
+                cmds.append(c.q_cmd)
+                robot_t += dt
+        except RobotError as exc:
+            sup.event(self.session_time(), "robot_error", str(exc))
+            self.flush_events()
+            if disconnect:
+                self._safe_disconnect()
+            raise
+        self.flush_events()
+        if disconnect:
+            self._safe_disconnect()
+        return LoopStats(
+            cycles=cyc.n,
+            cycle_us=cyc.array()[1:],
+            compute_us=comp.array(),
+            rcm_error_measured=rm.array(),
+            rcm_error_reference=rr.array(),
+            commands=cmds.array(),
+            q_start=q_start,
+            p_R=np.array(self._p_R(), dtype=float),
+            robot_time=robot_t,
+            wall_time=time.perf_counter() - wall0,
+            deadline_misses=sup.deadline_misses,
+            over_budget=self.over_budget,
+            alarm=sup.alarm_reason,
+            stopped_at_rest=sup.at_rest,
+        )
+
+    def flush_events(self) -> None:
+        """Hand the supervisor's pending events (raised outside a cycle) to ``on_events``."""
+        events = self.supervisor.drain_events()
+        if events and self.on_events is not None:
+            self.on_events(events)
+
+    def _safe_disconnect(self) -> None:
+        try:
+            self.robot.disconnect()
+        except Exception as exc:  # report, never mask the original outcome
+            self.supervisor.event(self.session_time(), "disconnect_error", str(exc))
+            self.flush_events()
