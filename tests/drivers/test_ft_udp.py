@@ -295,3 +295,118 @@ def test_control_loop_reads_never_block_while_streaming(device: FakeFTDevice) ->
         total = time.perf_counter() - t_start
     assert total < 0.5
     assert worst < 0.05  # generous bound for a loaded 2-core CI box (typically ~1 us)
+
+
+# --------------------------------------------------------------------------- polled mode (no thread)
+class RawPeer:
+    """A loopback 'device' socket the test drives datagram by datagram."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(2.0)
+        self.port = self.sock.getsockname()[1]
+        self.client: tuple[str, int] | None = None
+
+    def answer_start(self) -> threading.Thread:
+        """Reply to the first start request with one record (seq 1), from a thread."""
+
+        def run() -> None:
+            while True:
+                data, addr = self.sock.recvfrom(64)
+                if unpack_request(data)[1] == CMD_START_REALTIME:
+                    self.client = addr
+                    self.sock.sendto(pack_record(1, 1, 0, [0] * 6), addr)
+                    return
+
+        t = threading.Thread(target=run, daemon=True)
+        t.start()
+        return t
+
+    def send(self, data: bytes) -> None:
+        assert self.client is not None
+        self.sock.sendto(data, self.client)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@pytest.fixture
+def peer() -> Iterator[RawPeer]:
+    p = RawPeer()
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def settle(s: OnRobotHexSensor, n: int) -> int:
+    """Drain until ``n`` datagrams were read (loopback delivery is not instantaneous)."""
+    got = 0
+    deadline = time.monotonic() + 2.0
+    while got < n and time.monotonic() < deadline:
+        got += s.drain()
+        time.sleep(0.001)
+    return got
+
+
+def test_drain_reads_everything_pending_and_publishes_only_the_newest(peer: RawPeer) -> None:
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        assert s.polled and not s.running  # no reader thread
+        assert s._sock is not None and s._sock.gettimeout() == 0.0  # non-blocking
+        seq0 = s.latest().seq
+        assert s.drain() == 0 and s.latest().seq == seq0  # nothing pending: returns at once
+        for i in range(2, 7):
+            peer.send(pack_record(i, i, 0, [10000 * i, 0, 0, 0, 0, 0]))
+        assert settle(s, 5) == 5
+        sample = s.latest()
+        assert sample.seq == seq0 + 1  # five records read, one published
+        np.testing.assert_allclose(sample.value.force, [6.0, 0.0, 0.0])  # the newest
+        assert s.status().drops == 0 and s.status().samples == seq0 + 1
+    finally:
+        s.stop()
+    assert not s.polled
+
+
+def test_drain_skips_malformed_and_status_error_records_and_keeps_the_newest_valid(peer: RawPeer) -> None:
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        peer.send(pack_record(2, 2, 0, [20000, 0, 0, 0, 0, 0]))
+        peer.send(b"\x00" * 20)  # malformed
+        peer.send(pack_record(3, 3, 0x40, [90000, 0, 0, 0, 0, 0]))  # device error word
+        peer.send(pack_record(2, 2, 0, [70000, 0, 0, 0, 0, 0]))  # out of order (duplicate seq)
+        assert settle(s, 4) == 4
+        np.testing.assert_allclose(s.latest().value.force, [2.0, 0.0, 0.0])
+        st = s.status()
+        assert st.malformed == 2 and st.out_of_order == 1 and s.last_status == 0x40
+    finally:
+        s.stop()
+
+
+def test_polled_tare_drains_by_itself(device: FakeFTDevice) -> None:
+    device.counts = np.array([12000, -3000, 40000, 5000, 0, -7000])
+    s = OnRobotHexSensor(*device.address).start_polled()
+    try:
+        bias = s.tare(n_samples=20, timeout=2.0)
+        np.testing.assert_allclose(bias, device.counts / [1e4, 1e4, 1e4, 1e5, 1e5, 1e5])
+        time.sleep(0.02)
+        s.drain()
+        np.testing.assert_allclose(s.latest().value.as_array(), 0.0, atol=1e-12)
+    finally:
+        s.stop()
+
+
+def test_polled_start_without_device_times_out_clearly() -> None:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]  # bound but silent
+    try:
+        s = OnRobotHexSensor("127.0.0.1", port, start_timeout=0.3)
+        with pytest.raises(DeviceTimeoutError, match=f"udp://127.0.0.1:{port}"):
+            s.start_polled()
+        assert not s.polled and s.drain() == 0  # stopped: draining a closed source is a no-op
+    finally:
+        sock.close()

@@ -119,3 +119,94 @@ def build_loop(
     return loop, log
 
 
+
+
+# -- the process path (lapwrench.hardware.rt_process) -------------------------------------------
+def rt_spec(cfg: Config, **kw: Any) -> Any:
+    """An RtSpec on the simulated robot (paced to the wall clock), real-time settings off (tests)."""
+    import functools
+
+    from lapwrench.hardware.rt_process import RtOptions, RtSpec, sim_factory
+
+    kw.setdefault("robot_factory", functools.partial(sim_factory, realtime=True))
+    kw.setdefault("supervisor", relaxed_supervisor_config())
+    kw.setdefault("rt", RtOptions(fifo_priority=None, warn=False))
+    # heartbeat timeouts far above any stall of a loaded CI machine (a test that injects a hang
+    # sets its own): the tests assert what happens, never how fast
+    kw.setdefault("feeder_timeout", 5.0)
+    kw.setdefault("detector_timeout", 5.0)
+    return RtSpec(cfg=cfg, **kw)
+
+
+def rt_process(spec: Any, **kw: Any) -> Any:
+    """An RtProcess with a child heartbeat timeout for a loaded CI machine (5 s unless given)."""
+    from lapwrench.hardware.rt_process import RtProcess
+
+    kw.setdefault("child_timeout", 5.0)
+    return RtProcess(spec, **kw)
+
+
+def feeder_main(bus_name: str, bus_rows: tuple[int, int], period: float = 0.001) -> None:
+    """A feeder in a process of its own (so a test can kill or stop it): beats the parent heartbeat
+    and publishes a firm grip into the tactile slot, until killed."""
+    from lapwrench.hardware.rt_process import BEAT_PARENT, bus_layout
+    from lapwrench.hardware.shm import Bus
+
+    bus = Bus.attach(bus_name, bus_layout(*bus_rows))
+    beat, slot = bus["beat"], bus.slot("tactile")
+    grip = np.full(64, 40.0)
+    while True:
+        now = time.monotonic()
+        beat[BEAT_PARENT] = now
+        slot.write(grip, now)
+        time.sleep(period)
+
+
+@dataclass
+class FixedDetection:
+    u: float
+    v: float
+
+
+class FixedDetector:
+    """A detector that finds the same two instruments in every frame (and fails on an all-black one)."""
+
+    def detect(self, image: np.ndarray) -> list[FixedDetection]:
+        if image.size and int(image.max()) == 0 and getattr(self, "_warm", False):
+            raise ValueError("black frame")
+        self._warm = True
+        return [FixedDetection(400.0, 300.0), FixedDetection(250.0, 200.0)]
+
+
+def fixed_detector() -> FixedDetector:
+    return FixedDetector()
+
+
+def failing_detector() -> Any:
+    raise RuntimeError("no such model: /nowhere/model.onnx")
+
+
+class QdProbe:
+    """``RtSpec.loop_hook`` for a Franka in the child: reports the robot's last ``q_d`` (the desired
+    joints it reports) and whether the connect reading carried an external force."""
+
+    def __init__(self, loop: Any) -> None:
+        self.q_d: list[float] | None = None
+        self.external_force_at_connect: Any = "unknown"
+        robot = loop.robot
+        connect, disconnect = robot.connect, robot.disconnect
+
+        def probed_connect() -> Any:
+            r = connect()
+            self.external_force_at_connect = None if r.external_force is None else list(r.external_force)
+            return r
+
+        def probed_disconnect() -> None:
+            if getattr(robot, "state", None) is not None:
+                self.q_d = [float(x) for x in robot.state.q_d]
+            disconnect()
+
+        robot.connect, robot.disconnect = probed_connect, probed_disconnect
+
+    def report(self) -> dict[str, Any]:
+        return {"q_d_last": self.q_d, "external_force_at_connect": self.external_force_at_connect}

@@ -50,6 +50,9 @@ frame, bias removed) in a :class:`~lapwrench.drivers.buffer.LatestValue`; the sa
 the host ``time.monotonic()`` at reception. Malformed datagrams (wrong length, a request header
 where a record is expected, non-zero status) raise :class:`~lapwrench.drivers.base.PacketError`
 inside the reader thread, where they are counted and reported without stopping the thread.
+Polled mode: :meth:`UdpForceTorqueSensor.start_polled` opens a non-blocking socket and starts no
+thread; its owner calls :meth:`UdpForceTorqueSensor.drain` (e.g. at the start of each control
+cycle), which reads every pending datagram and publishes the newest valid one.
 UDP has no retransmission: the start command is re-sent until data arrives (like the public
 drivers), and lost records only show up as sequence gaps (``status().drops``).
 """
@@ -244,6 +247,7 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         self._scale = np.array([1.0 / self.counts_per_force] * 3 + [1.0 / self.counts_per_torque] * 3)
         self._bias = np.zeros(6)
         self._tare: _TareCollector | None = None
+        self._polled = False
         self.last_status = 0
         """Most recent non-zero device status word (0 if none was seen)."""
 
@@ -268,6 +272,7 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         self._sock = sock
 
     def _close(self) -> None:
+        self._polled = False
         sock, self._sock = self._sock, None
         if sock is None:
             return
@@ -332,9 +337,20 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         self._handle_datagram(data, now)
 
     def _handle_datagram(self, data: bytes, now: float) -> None:
+        accepted = self._accept_datagram(data)
+        if accepted is not None:
+            self._publish_raw(*accepted, now)
+
+    def _accept_datagram(self, data: bytes) -> tuple[NDArray[np.float64], FTRecord] | None:
+        """Decode and check one datagram (sequence, status, tare); the raw wrench (N, N·m, bias
+        not removed) and its record, or ``None`` for a duplicate/out-of-order record.
+
+        Raises:
+            PacketError: malformed datagram or (:class:`StatusError`) a device status error.
+        """
         rec = unpack_record(data)
         if not self.rate.check_seq(rec.sequence):
-            return  # duplicate / out-of-order, counted by the rate monitor
+            return None  # duplicate / out-of-order, counted by the rate monitor
         if rec.status & self.status_error_mask:
             self.last_status = rec.status
             raise StatusError(f"device status 0x{rec.status:08x}")
@@ -344,9 +360,113 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
             tare.samples.append(raw)
             if len(tare.samples) >= tare.n:
                 tare.done.set()
+        return raw, rec
+
+    def _publish_raw(self, raw: NDArray[np.float64], rec: FTRecord, now: float) -> None:
         w = raw - self._bias
         w.flags.writeable = False
         self._publish(Wrench(w[:3], w[3:], rec.ft_sequence, rec.status), now)
+
+    # ----------------------------------------------------------------- polled mode (no thread)
+    @property
+    def polled(self) -> bool:
+        """True while the source runs without a reader thread (:meth:`start_polled`)."""
+        return self._polled and self._sock is not None
+
+    def start_polled(self) -> UdpForceTorqueSensor:
+        """Open the socket *non-blocking* and start streaming without a reader thread.
+
+        The owner then calls :meth:`drain` (e.g. at the start of every control cycle): nothing
+        else reads the socket, so no thread of this process competes with the caller for the
+        interpreter. Waits (here, not in :meth:`drain`) up to ``start_timeout`` for a first valid
+        record, re-sending the start command, like :meth:`start`.
+
+        Raises:
+            DeviceOpenError: the device cannot be opened or configured.
+            DeviceTimeoutError: no valid record arrived in time (the source is stopped).
+            RuntimeError: the source is already running.
+        """
+        if self.running or self.polled:
+            raise RuntimeError(f"{self.name}: already started")
+        self._stop_event.clear()
+        self._open()
+        self._opened = True
+        self._polled = True
+        assert self._sock is not None
+        self._sock.setblocking(False)
+        try:
+            try:
+                self._configure_device()
+            except OSError as exc:
+                raise DeviceOpenError(self.device, f"configuration command failed: {exc}") from exc
+            self.rate.forget_seq()
+            latest = self.buffer.get()
+            seq0 = 0 if latest is None else latest.seq
+            deadline = time.monotonic() + self.start_timeout
+            last_err: str | None = None
+            next_send = 0.0
+            while True:
+                now = time.monotonic()
+                if now >= next_send:
+                    try:
+                        self.send_command(CMD_START_REALTIME, 0)
+                    except OSError as exc:
+                        last_err = str(exc)
+                    next_send = now + self.start_retry_s
+                self.drain()
+                s = self.buffer.get()
+                if s is not None and s.seq > seq0:
+                    return self
+                if time.monotonic() >= deadline:
+                    break
+                time.sleep(0.001)
+            st = self.status()
+            detail = f"; last error: {st.last_error or last_err}" if (st.last_error or last_err) else ""
+            raise DeviceTimeoutError(
+                self.device,
+                f"no valid record within {self.start_timeout:.2f} s "
+                f"(malformed={st.malformed}, io_errors={st.io_errors}{detail})",
+            )
+        except BaseException:
+            self.stop()
+            raise
+
+    def drain(self, now: float | None = None, max_datagrams: int = 1024) -> int:
+        """Read every pending datagram without blocking; publish the newest valid one.
+
+        Every datagram goes through the same checks as in the thread mode (sequence accounting,
+        status word, tare collection; malformed ones are counted); only the newest valid record
+        is published, stamped ``now`` (default ``time.monotonic()``): the time it was taken off
+        the socket, at most one drain period after it arrived. Returns the number of datagrams
+        read. Never raises on I/O: an error (e.g. ICMP port unreachable) is counted and the data
+        goes stale.
+        """
+        sock = self._sock
+        if sock is None:
+            return 0
+        newest: tuple[NDArray[np.float64], FTRecord] | None = None
+        n = 0
+        while n < max_datagrams:
+            try:
+                data = sock.recv(2048)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:
+                self._record_io_error(exc)
+                break
+            n += 1
+            try:
+                accepted = self._accept_datagram(data)
+            except PacketError as exc:
+                self._record_malformed(exc)
+                continue
+            if accepted is not None:
+                newest = accepted
+        if newest is not None:
+            self._publish_raw(*newest, time.monotonic() if now is None else now)
+        return n
+
+    poll = drain
 
     # ----------------------------------------------------------------- bias / tare
     @property
@@ -368,8 +488,9 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
     def tare(self, n_samples: int = 100, timeout: float = 2.0) -> NDArray[np.float64]:
         """Average the next ``n_samples`` raw records and use the mean as the software bias.
 
-        Blocks the caller (never the reader thread) for up to ``timeout`` s. Call it while the
-        handle is not touched. Returns the new bias (6,).
+        Blocks the caller (never the reader thread) for up to ``timeout`` s; in polled mode
+        (:meth:`start_polled`) it drains the socket itself meanwhile. Call it while the handle is
+        not touched. Returns the new bias (6,).
 
         Raises:
             RuntimeError: the source is not running.
@@ -377,12 +498,17 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         """
         if n_samples < 1:
             raise ValueError("n_samples must be >= 1")
-        if not self.running:
+        if not (self.running or self.polled):
             raise RuntimeError(f"{self.name}: tare needs a running source")
         collector = _TareCollector(n_samples)
         self._tare = collector
         try:
-            if not collector.done.wait(timeout):
+            if self.polled:  # no reader thread: drain here until enough samples came in
+                deadline = time.monotonic() + timeout
+                while not collector.done.is_set() and time.monotonic() < deadline:
+                    self.drain()
+                    time.sleep(0.0005)
+            if not collector.done.wait(0.0 if self.polled else timeout):
                 raise DeviceTimeoutError(
                     self.device,
                     f"tare got {len(collector.samples)}/{n_samples} samples in {timeout:.2f} s",

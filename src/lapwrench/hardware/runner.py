@@ -28,6 +28,7 @@ the drivers stamp with); the robot's own time is logged beside it. The loop work
 
 from __future__ import annotations
 
+import gc
 import math
 import sys
 import threading
@@ -207,6 +208,12 @@ class ControlLoop:
         stop_timeout: Robot seconds allowed for the final stop to come to rest.
         switch_interval: Python's thread switch interval (s) while :meth:`run` runs (restored
             afterwards); ``None`` leaves it alone. See :meth:`run` for why.
+        pre_cycle: Called with the ``time.monotonic()`` of each cycle right after ``robot.read()``
+            and before the sensor frame is built (inside the measured compute time): the
+            real-time process drains the F/T socket and checks its peers' heartbeats there
+            (:mod:`lapwrench.hardware.rt_process`).
+        gc_freeze: Freeze and disable Python's cyclic garbage collector for :meth:`run`
+            (``gc.collect(); gc.freeze(); gc.disable()``; re-enabled afterwards).
     """
 
     def __init__(
@@ -222,6 +229,8 @@ class ControlLoop:
         compute_hook: Callable[[int], None] | None = None,
         stop_timeout: float = 5.0,
         switch_interval: float | None = 1e-4,
+        pre_cycle: Callable[[float], None] | None = None,
+        gc_freeze: bool = False,
     ) -> None:
         if switch_interval is not None and not (math.isfinite(switch_interval) and switch_interval > 0):
             raise ValueError(f"switch_interval must be a positive number of seconds, got {switch_interval!r}")
@@ -235,6 +244,8 @@ class ControlLoop:
         self.compute_hook = compute_hook
         self.stop_timeout = stop_timeout
         self.switch_interval = switch_interval
+        self.pre_cycle = pre_cycle
+        self.gc_freeze = gc_freeze
         self._t0 = 0.0
         self._fresh: dict[str, bool] = {}
         self.last_result: TickResult | None = None
@@ -328,10 +339,19 @@ class ControlLoop:
         previous_interval = sys.getswitchinterval()
         if self.switch_interval is not None:
             sys.setswitchinterval(self.switch_interval)
+        gc_was_enabled = gc.isenabled()
+        if self.gc_freeze:
+            gc.collect()
+            gc.freeze()
+            gc.disable()
         try:
             return self._run(duration, stop_event, disconnect)
         finally:
             sys.setswitchinterval(previous_interval)
+            if self.gc_freeze:
+                gc.unfreeze()
+                if gc_was_enabled:
+                    gc.enable()
 
     def _run(self, duration: float | None, stop_event: threading.Event | None, disconnect: bool) -> LoopStats:
         if not self._started:
@@ -365,6 +385,8 @@ class ControlLoop:
                 reading = robot.read()
                 t_read = time.perf_counter()
                 now = time.monotonic()
+                if self.pre_cycle is not None:
+                    self.pre_cycle(now)
                 frame = self._frame(now, reading)
                 result = self._tick(frame)
                 if result is not None:
