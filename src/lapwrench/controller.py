@@ -22,7 +22,15 @@ from lapwrench.rcm.adaptive import AdaptiveRcm
 from lapwrench.rcm.geometry import initial_rcm_point
 from lapwrench.robot.description import ScopeGeometry
 from lapwrench.robot.model import RobotModel
-from lapwrench.sensors import InputEvent, InputValidator, SensorFrame
+from lapwrench.sensors import (
+    ForceTorqueReading,
+    InputEvent,
+    InputValidator,
+    InstrumentObservation,
+    RobotReading,
+    SensorFrame,
+    TactileReading,
+)
 from lapwrench.spatial import Vec
 from lapwrench.tick_core import TickParams
 from lapwrench.wrenches.base import WrenchSource
@@ -129,8 +137,23 @@ class Controller:
         so that :meth:`reset` after a robot connects never waits for the compiler. Leaves the
         controller un-reset."""
         lim = self.model.limits
-        self.reset(0.5 * (lim.position_lower + lim.position_upper))
+        q = 0.5 * (lim.position_lower + lim.position_upper)
+        self.reset(q)
+        # one tick through every path: every input valid, the saturation QP forced by a hook
+        z = np.zeros(3)
+        frame = SensorFrame(
+            0.0, ForceTorqueReading(np.array([1.0, 0.0, 0.0]), z, 0.0), TactileReading(np.full(64, 50.0), 0.0),
+            InstrumentObservation(np.array([[100.0, 100.0]]), 0.0), RobotReading(q, np.zeros(7), z, 0.0),
+        )
+        hook, self.bounds_hook = self.bounds_hook, lambda ref, lo, hi: (lo, hi)
+        try:
+            self.tick(frame)
+        finally:
+            self.bounds_hook = hook
         self.ref = self.rcm = self.compiled = None
+        self.shaper.clamped_ticks = 0
+        self.events.clear()
+        self.event_counts.clear()
 
     # -- setup --------------------------------------------------------------------------------
     def reset(self, q0: Vec, p_R: Vec | None = None) -> None:

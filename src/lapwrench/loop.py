@@ -207,6 +207,8 @@ class ControlLoop:
             if hasattr(s, "t0"):
                 s.t0 = self.t0  # type: ignore[attr-defined]
         self.controller.reset(reading.q, p_R)
+        assert self.controller.rcm is not None
+        measure_scope(self.controller.model, reading.q, self.controller.rcm.p_R)  # loads its compiled code now
         self.supervisor.start(reading.q, 0.0)
         self._controller_failed = False
         self.last_reading = reading

@@ -55,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from lapwrench.config import Config, EnvelopeConfig, SafetyConfig
-from lapwrench.rcm.geometry import insertion_depth, rcm_error
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.limits import JointLimits
 from lapwrench.robot.model import RobotModel
 from lapwrench.spatial import Vec
@@ -182,8 +182,8 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     if q.shape != (7,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
     axis = model.scope_axis_at(q)
-    e = rcm_error(axis, p)  # type: ignore[arg-type]  # ScopeAxis has the fields rcm.geometry reads
-    return MeasuredScope(math.sqrt(float(e @ e)), insertion_depth(axis, p, model.length))  # type: ignore[arg-type]
+    e, depth = axis_rcm_error_and_depth(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))
+    return MeasuredScope(float(e), float(depth))
 
 
 def _rate_limited(count: int) -> bool:

@@ -5,12 +5,13 @@ All quantities are in the base frame {B}; ``kin`` is the tick's :class:`Kinemati
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.robot.model import Kinematics
+from lapwrench.robot.model import Kinematics, ScopeAxis
 from lapwrench.spatial import Mat, Vec, skew
 
 
@@ -45,6 +46,15 @@ def rcm_error(kin: Kinematics, p_R: Vec) -> Vec:
 def insertion_depth(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
     return length - float(kin.d_z @ (p_R - kin.p_E))
+
+
+@kernel
+def axis_rcm_error_and_depth(p_E: Vec, d_z: Vec, P: Mat, p_R: Vec, length: float) -> tuple[float, float]:
+    """|e_R| (eq 27) and the tip depth beyond p_R for a scope axis given by its arrays (e.g. at the
+    measured joints): array arguments only, so the call from Python is cheap."""
+    axis = ScopeAxis(p_E, d_z, P)
+    e = rcm_error(axis, p_R)
+    return math.sqrt(e @ e), insertion_depth(axis, p_R, length)
 
 
 @kernel

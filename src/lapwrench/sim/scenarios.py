@@ -73,6 +73,20 @@ def _axis_toward(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def loop_compute_metrics(loop: ClosedLoop) -> dict[str, float | int]:
+    """The control loop's own figures over the run: compute time per cycle (wall clock, from the
+    robot's read to the command) and the cycles over the supervisor's 800 µs budget. The simulated
+    robot waits for the loop, so these are reported, not enforced (a real robot enforces them)."""
+    c = np.asarray(loop.compute_us)
+    if not c.size:
+        return {}
+    return {
+        "loop_compute_p50_us": float(np.percentile(c, 50)),
+        "loop_compute_p99_us": float(np.percentile(c, 99)),
+        "loop_over_budget_cycles": int(np.sum(c > loop.supervisor.cfg.cycle_budget * 1e6)),
+    }
+
+
 def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | None = None) -> dict:
     """Physical metrics of one run."""
     F = np.linalg.norm(trace["contact_force"], axis=1)
@@ -96,6 +110,7 @@ def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | 
         "real_time_factor": sim_time / wall if wall > 0 else None,
         "insertion_drift_mm": float(np.ptp(trace["insertion_depth"]) * 1e3),
     }
+    m.update(loop_compute_metrics(loop))
     if "pixel_error" in trace:
         px = trace["pixel_error"]
         seen = px[np.isfinite(px)]
