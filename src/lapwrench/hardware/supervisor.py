@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from lapwrench.config import Config, EnvelopeConfig, SafetyConfig
+from lapwrench.jit import kernel
 from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.limits import JointLimits
 from lapwrench.robot.model import RobotModel
@@ -186,6 +187,42 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     return MeasuredScope(float(e), float(depth))
 
 
+@kernel
+def command_violation(
+    q: Vec, q_prev: Vec, v_prev: Vec, a_prev: Vec, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec,
+    j_max: Vec, dt: float,
+) -> tuple[int, int, float]:
+    """The first limit the command ``q`` breaks after the history (q, v, a) as libfranka differentiates
+    it: (0 none | 1 position | 2 velocity | 3 acceleration | 4 jerk, joint, value)."""
+    n = q.shape[0]
+    for j in range(n):
+        if q[j] < lo[j] - tol or q[j] > hi[j] + tol:
+            return 1, j, q[j]
+    v = (q - q_prev) / dt
+    a = (v - v_prev) / dt
+    jk = (a - a_prev) / dt
+    for code, value, limit in ((2, v, v_max), (3, a, a_max), (4, jk, j_max)):
+        worst, jw = 0.0, 0
+        for j in range(n):
+            r = abs(value[j]) / limit[j]
+            if r > worst:
+                worst, jw = r, j
+        if worst > 1.0 + 1e-9:
+            return code, jw, value[jw]
+    return 0, 0, 0.0
+
+
+@kernel
+def nearest_limit(q: Vec, lo: Vec, hi: Vec) -> tuple[int, float]:
+    """The joint nearest to one of its limits and its room (rad)."""
+    jm, room = 0, np.inf
+    for j in range(q.shape[0]):
+        r = min(q[j] - lo[j], hi[j] - q[j])
+        if r < room:
+            jm, room = j, r
+    return jm, room
+
+
 def _rate_limited(count: int) -> bool:
     """Log the first 10 occurrences, then every 1000th."""
     return count <= 10 or count % 1000 == 0
@@ -298,29 +335,25 @@ class SafetySupervisor:
             return "command_invalid", "command is not numeric"
         if q.shape != (7,):
             return "command_invalid", f"command has shape {q.shape}, expected (7,)"
-        if not np.all(np.isfinite(q)):
+        q = np.ascontiguousarray(q)
+        if not math.isfinite(q.sum()):
             return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"
-        tol = self.cfg.position_tolerance
-        bad = np.flatnonzero((q < self._lo - tol) | (q > self._hi + tol))
-        if bad.size:
-            j = int(bad[0])
+        code, j, value = command_violation(
+            q, self._q, self._v, self._a, self._lo, self._hi, self.cfg.position_tolerance, self._v_max,
+            self._a_max, self._j_max, self.dt,
+        )
+        if code == 0:
+            return None
+        if code == 1:
             return "command_position", (
                 f"joint {j + 1} command {q[j]:.4f} rad outside [{self._lo[j]:.4f}, {self._hi[j]:.4f}]"
             )
-        dt = self.dt
-        v = (q - self._q) / dt
-        a = (v - self._v) / dt
-        jk = (a - self._a) / dt
-        for kind, value, limit, unit in (
-            ("command_velocity", v, self._v_max, "rad/s"),
-            ("command_acceleration", a, self._a_max, "rad/s^2"),
-            ("command_jerk", jk, self._j_max, "rad/s^3"),
-        ):
-            ratio = np.abs(value) / limit
-            j = int(np.argmax(ratio))
-            if ratio[j] > 1.0 + 1e-9:
-                return kind, f"joint {j + 1} {kind.split('_')[1]} {value[j]:.4g} {unit} exceeds {limit[j]:.4g}"
-        return None
+        kind, limit, unit = (
+            ("command_velocity", self._v_max, "rad/s"),
+            ("command_acceleration", self._a_max, "rad/s^2"),
+            ("command_jerk", self._j_max, "rad/s^3"),
+        )[code - 2]
+        return kind, f"joint {j + 1} {kind.split('_')[1]} {value:.4g} {unit} exceeds {limit[j]:.4g}"
 
     def _accept(self, q: Vec) -> None:
         dt = self.dt
@@ -366,18 +399,17 @@ class SafetySupervisor:
 
     def _watch_joints(self, time: float, q_measured: Vec) -> None:
         c = self.cfg
-        qm = np.asarray(q_measured, dtype=float)
-        if qm.shape != (7,) or not np.all(np.isfinite(qm)):
+        qm = np.ascontiguousarray(q_measured, dtype=np.float64)
+        if qm.shape != (7,) or not math.isfinite(qm.sum()):
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return
-        room = np.minimum(qm - self._lo, self._hi - qm)
-        j = int(np.argmin(room))
-        if room[j] < c.joint_stop_margin:
+        j, room = nearest_limit(qm, self._lo, self._hi)
+        if room < c.joint_stop_margin:
             if self.state is SupervisorState.RUNNING:
-                self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
-        elif room[j] < c.joint_warn_margin:
+                self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")
+        elif room < c.joint_warn_margin:
             if not self._joint_warned:
-                self.event(time, "joint_limit_near", f"joint {j + 1} measured {room[j]:.4f} rad from its limit")
+                self.event(time, "joint_limit_near", f"joint {j + 1} measured {room:.4f} rad from its limit")
                 self._joint_warned = True
         else:
             self._joint_warned = False
