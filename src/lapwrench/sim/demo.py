@@ -157,6 +157,10 @@ def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, Scenario
         finally:
             _PROGRESS = None
         return out
+    from lapwrench.controller import Controller
+
+    Controller(plan.configs[names[0]] if names[0] in plan.configs else config_mod.load())  # compile once, here:
+    # the workers then load numba's cache instead of each compiling the tick (a minute on a fresh clone)
     ctx = mp.get_context("spawn")  # no fork of a process holding MuJoCo/EGL and numba state
     queue = ctx.Queue()
     with ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)) as pool:
