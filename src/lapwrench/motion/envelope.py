@@ -140,7 +140,7 @@ def envelope_rows(
     w = twist[:3].copy()
     wd = w @ d
     if w @ w - wd * wd < 1e-12:
-        w = kin.J_E[:3] @ (kin.dq + dt * a_d)
+        w = np.ascontiguousarray(kin.J_E[:3]) @ (kin.dq + dt * a_d)
         wd = w @ d
     u = w - wd * d
     n = math.sqrt(u @ u)

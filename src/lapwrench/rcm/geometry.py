@@ -71,8 +71,8 @@ def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     d = kin.d_z
     r = p_R - kin.p_E
     Sd = skew(d)
-    J_w = kin.J_E[:3]
-    J_v = kin.J_E[3:]
+    J_w = np.ascontiguousarray(kin.J_E[:3])
+    J_v = np.ascontiguousarray(kin.J_E[3:])
     return ((d @ r) * Sd + np.outer(d, r @ Sd)) @ J_w - kin.P @ J_v
 
 
@@ -87,7 +87,7 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """
     d = kin.d_z
     r = p_R - kin.p_E
-    return (d @ r) * skew(d) @ kin.J_E[:3] - kin.P @ kin.J_E[3:]
+    return (d @ r) * skew(d) @ np.ascontiguousarray(kin.J_E[:3]) - kin.P @ np.ascontiguousarray(kin.J_E[3:])
 
 
 @kernel
@@ -113,5 +113,5 @@ def closest_point(kin: Kinematics, s_star: float, length: float) -> tuple[Vec, V
 @kernel
 def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
     """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
-    J_w = kin.J_E[:3]
+    J_w = np.ascontiguousarray(kin.J_E[:3])
     return np.vstack((J_w, kin.J_E[3:] - skew(o_G) @ J_w))
