@@ -90,3 +90,21 @@ def test_tick_mean_torque_matches_the_instantaneous_one_at_rest(world: SimWorld)
     for _ in range(200):
         world.step(world.scene.q0)
     np.testing.assert_allclose(world.joint_torque_tick_mean(), world.joint_torque_measured(), atol=1e-6)
+
+
+def test_reading_uses_the_observer_on_the_measured_torques(panda_scene: Scene) -> None:
+    """SimRobot.read: the compiled observer on (q, dq, noisy tau_J) equals the numpy reference tick."""
+    from lapwrench.sim.sensors import ExternalForceObserver
+
+    world = SimWorld(panda_scene)
+    robot = SimRobot(world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=4))
+    ref = ExternalForceObserver(robot.model, robot.est.observer_gain, robot.est.damping)
+    r = robot.connect()
+    f_ref = ref.update_reference(r.q, r.dq, robot.tau_J, CONTROL_DT)
+    world.set_hand_wrench(np.array([4.0, 2.0, -1.0, 0.0, 0.0, 0.0]))
+    for k in range(300):
+        robot.command(world.scene.q0 + 0.03 * np.sin(k * 0.02))
+        r = robot.read()
+        f_ref = ref.update_reference(r.q, r.dq, robot.tau_J, CONTROL_DT)
+        np.testing.assert_allclose(r.external_force, f_ref, rtol=0, atol=1e-9)
+    assert np.linalg.norm(f_ref) > 2.0

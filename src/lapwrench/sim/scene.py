@@ -697,6 +697,35 @@ def instrument_pose_through_port(port: np.ndarray, tip: np.ndarray, roll: float 
     The instrument frame has its origin at the jaw tip and +z along the shaft toward the tip; ``roll``
     rotates it about its shaft.
     """
+    # Called every tick while an instrument moves: scalar arithmetic, the same operations (and
+    # bits) as np.cross / np.linalg.norm on the 3-vectors, without their per-call overhead.
+    tip = np.asarray(tip, float)
+    z = tip - np.asarray(port, float)
+    nz = math.sqrt(z.dot(z))
+    if nz < 1e-6:
+        raise ValueError("instrument tip coincides with its port")
+    z0, z1, z2 = (z / nz).tolist()
+    if abs(z2) < 0.9:  # x = ref x z, ref = (0, 0, 1)
+        x0, x1, x2 = 0.0 * z2 - 1.0 * z1, 1.0 * z0 - 0.0 * z2, 0.0 * z1 - 0.0 * z0
+    else:  # ref = (1, 0, 0)
+        x0, x1, x2 = 0.0 * z2 - 0.0 * z1, 0.0 * z0 - 1.0 * z2, 1.0 * z1 - 0.0 * z0
+    nx = math.sqrt(np.dot((x0, x1, x2), (x0, x1, x2)))
+    x0, x1, x2 = x0 / nx, x1 / nx, x2 / nx
+    y0, y1, y2 = z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0  # z x x
+    c, s = math.cos(roll), math.sin(roll)
+    x0, x1, x2, y0, y1, y2 = (
+        c * x0 + s * y0, c * x1 + s * y1, c * x2 + s * y2, -s * x0 + c * y0, -s * x1 + c * y1, -s * x2 + c * y2,
+    )  # fmt: skip
+    R = np.array([x0, y0, z0, x1, y1, z1, x2, y2, z2])  # columns x, y, z (row-major)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, R)
+    return tip.copy(), quat
+
+
+def _instrument_pose_through_port_numpy(
+    port: np.ndarray, tip: np.ndarray, roll: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`instrument_pose_through_port` written with numpy's vector functions (the tests' reference)."""
     z = np.asarray(tip, float) - np.asarray(port, float)
     nz = np.linalg.norm(z)
     if nz < 1e-6:

@@ -11,15 +11,20 @@
 - :class:`SimCamera`: laparoscope frames rendered at 25 fps.
 
 Every model draws from its own seeded generator, so a run is reproducible from its seed.
+
+The observer's per-tick algebra is one numba kernel (:func:`_observer_step`) around the Pinocchio
+calls; the F/T sensor reads its six sensor values through cached addresses.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+from lapwrench.jit import bind, kernel
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import ForceTorqueReading, TactileReading
 from lapwrench.sim.scene import FT_FORCE_SENSOR, FT_TORQUE_SENSOR
@@ -45,6 +50,27 @@ class _SampleAndHold:
         return False
 
 
+_ZERO6 = np.zeros(6)
+
+
+@kernel
+def _ft_sample(
+    sensordata: np.ndarray,
+    adr: np.ndarray,
+    bias: np.ndarray,
+    sigma: np.ndarray,
+    z: np.ndarray,
+    tare: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """out = (-sensordata[adr] + (bias + sigma z)) - tare, element by element (numpy's order).
+
+    MuJoCo reports the force the scope exerts on the grip body; the hand's is its opposite.
+    """
+    for i in range(adr.size):
+        out[i] = (-sensordata[adr[i]] + (bias[i] + sigma[i] * z[i])) - tare[i]
+
+
 @dataclass(frozen=True)
 class ForceTorqueNoise:
     """HEX-E class figures: ~0.1 N / 0.005 N m noise, a few tenths of a newton of bias."""
@@ -66,19 +92,31 @@ class SimForceTorqueSensor:
         m = world.model
         self._f = m.sensor(FT_FORCE_SENSOR).adr[0]
         self._m = m.sensor(FT_TORQUE_SENSOR).adr[0]
+        self._adr = np.r_[self._f : self._f + 3, self._m : self._m + 3]  # [force; torque] in sensordata
+        self._sensordata = world.data.sensordata  # a view: MjData's arrays never move
+        self._noise_of: ForceTorqueNoise | None = None  # the noise settings _bias6, _sigma6 are of
+        z6 = np.zeros(6)
+        self._ft_sample = bind(_ft_sample, self._sensordata, self._adr, z6, z6, z6, z6, z6)
         self._rng = np.random.default_rng(seed)
         self._clock = _SampleAndHold(self.noise.rate_hz)
         self._last: ForceTorqueReading | None = None
         self._bias_est = np.zeros(6)
 
-    def _raw(self) -> np.ndarray:
-        d = self.world.data.sensordata
-        # MuJoCo reports the force the scope exerts on the grip body; the hand's is its opposite.
-        wrench = -np.concatenate([d[self._f : self._f + 3], d[self._m : self._m + 3]])
+    def _sample(self, tare: np.ndarray) -> np.ndarray:
+        """The sensor's wrench with its noise and bias, minus ``tare``."""
         n = self.noise
-        wrench[:3] += np.asarray(n.force_bias) + n.force_sigma * self._rng.standard_normal(3)
-        wrench[3:] += np.asarray(n.torque_bias) + n.torque_sigma * self._rng.standard_normal(3)
-        return wrench
+        if n is not self._noise_of:
+            self._bias6 = np.concatenate([np.asarray(n.force_bias, float), np.asarray(n.torque_bias, float)])
+            self._sigma6 = np.array([n.force_sigma] * 3 + [n.torque_sigma] * 3, float)
+            self._noise_of = n
+        w = np.empty(6)
+        # Force noise then torque noise, three draws each (one draw of six is the same stream).
+        z = self._rng.standard_normal(6)
+        self._ft_sample(self._sensordata, self._adr, self._bias6, self._sigma6, z, tare, w)
+        return w
+
+    def _raw(self) -> np.ndarray:
+        return self._sample(_ZERO6)  # x - 0.0 == x: the untared wrench, bit for bit
 
     def tare(self, samples: int = 200) -> None:
         """Average ``samples`` readings with the hand off and subtract them (as done with a real F/T)."""
@@ -86,7 +124,7 @@ class SimForceTorqueSensor:
 
     def read(self, t: float) -> ForceTorqueReading:
         if self._last is None or self._clock.due(t):
-            w = self._raw() - self._bias_est
+            w = self._sample(np.ascontiguousarray(self._bias_est, dtype=float))
             self._last = ForceTorqueReading(w[:3], w[3:], t)
         return self._last
 
@@ -122,18 +160,101 @@ class TactileGripModel:
         out = np.zeros(64)
         if grip_force <= 0.0:
             return out
-        n_c = int(min(64, round(m.patch_per_sqrt_newton * np.sqrt(grip_force))))
+        n_c = int(min(64, round(m.patch_per_sqrt_newton * math.sqrt(grip_force))))
         if n_c == 0:
             return out
         per = m.counts_per_newton * grip_force / n_c
-        vals = per + m.element_sigma * self._rng.standard_normal(n_c)
-        out[self._order[:n_c]] = np.clip(np.round(vals), 1.0, 255.0)
+        vals = np.round(per + m.element_sigma * self._rng.standard_normal(n_c))
+        np.maximum(vals, 1.0, out=vals)  # clip to 1-255 (np.clip, without its overhead)
+        np.minimum(vals, 255.0, out=vals)
+        out[self._order[:n_c]] = vals
         return out
 
     def read(self, t: float, grip_force: float) -> TactileReading:
         if self._last is None or self._clock.due(t):
             self._last = TactileReading(self.values(grip_force), t)
         return self._last
+
+
+@kernel
+def _observer_step(
+    M: np.ndarray,
+    C: np.ndarray,
+    g: np.ndarray,
+    J: np.ndarray,
+    dq: np.ndarray,
+    tau_J: np.ndarray,
+    r: np.ndarray,
+    dt: float,
+    gain: float,
+    lam2: float,
+    first: bool,
+    p0: np.ndarray,
+    integral: np.ndarray,
+    r_new: np.ndarray,
+    force: np.ndarray,
+) -> bool:
+    """One observer tick (see :class:`ExternalForceObserver`); False if the wrench solve is singular.
+
+    ``M``: Pinocchio's CRBA output (its upper triangle is used), ``C``: Coriolis matrix, ``g``:
+    gravity torque, ``J``: 6 x n frame Jacobian of {E} in {B} axes ([linear; angular] rows), ``r``:
+    the previous residual. Writes the new residual into ``r_new`` and the force part of the damped
+    least-squares wrench, (J Jᵀ + λ² I)⁻¹ J r, into ``force``; sets ``p0`` on the ``first`` tick.
+    """
+    n = dq.size
+    p = np.empty(n)
+    for i in range(n):  # p = M q̇ (M symmetric, from its upper triangle)
+        s = 0.0
+        for j in range(n):
+            s += (M[i, j] if j >= i else M[j, i]) * dq[j]
+        p[i] = s
+    if first:
+        p0[:] = p
+    for i in range(n):
+        ctq = 0.0  # (Cᵀ q̇)_i
+        for j in range(n):
+            ctq += C[j, i] * dq[j]
+        integral[i] += (tau_J[i] + ctq - g[i] + r[i]) * dt
+        r_new[i] = gain * (p[i] - p0[i] - integral[i])
+    m = J.shape[0]
+    A = np.empty((m, m))
+    b = np.empty(m)
+    for i in range(m):
+        for k in range(m):
+            s = 0.0
+            for j in range(n):
+                s += J[i, j] * J[k, j]
+            A[i, k] = s + lam2 if i == k else s
+        s = 0.0
+        for j in range(n):
+            s += J[i, j] * r_new[j]
+        b[i] = s
+    # Gaussian elimination with partial pivoting (LAPACK gesv's method), then back substitution.
+    for c in range(m):
+        piv = c
+        for i in range(c + 1, m):
+            if abs(A[i, c]) > abs(A[piv, c]):
+                piv = i
+        if A[piv, c] == 0.0:
+            return False
+        if piv != c:
+            for k in range(m):
+                A[c, k], A[piv, k] = A[piv, k], A[c, k]
+            b[c], b[piv] = b[piv], b[c]
+        for i in range(c + 1, m):
+            f = A[i, c] / A[c, c]
+            for k in range(c + 1, m):
+                A[i, k] -= f * A[c, k]
+            b[i] -= f * b[c]
+    x = np.empty(m)
+    for i in range(m - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, m):
+            s -= A[i, k] * x[k]
+        x[i] = s / A[i, i]
+    for i in range(force.size):
+        force[i] = x[i]
+    return True
 
 
 class ExternalForceObserver:
@@ -147,6 +268,9 @@ class ExternalForceObserver:
     r → τ_ext with first-order dynamics of bandwidth K_O (1/s), without differentiating q̇. The
     external wrench at {E} is the damped least-squares solution of τ_ext = J_Eᵀ W; its force part
     is the total external force, hand plus trocar.
+
+    Pinocchio computes M, C, g and J_E; the algebra of a tick is the compiled
+    :func:`_observer_step` (:meth:`update_reference` is the same tick in plain numpy).
     """
 
     def __init__(self, model: RobotModel, gain: float = 60.0, damping: float = 1e-3) -> None:
@@ -160,6 +284,10 @@ class ExternalForceObserver:
         self._p0: np.ndarray | None = None
         self._data = model.model.createData()
         self._lower = np.tril_indices(7, -1)
+        self._step = None  # the kernel bound to its argument types at the first update
+        # Compile the tick (or load it from numba's cache) now, not in the first reading.
+        self.update(pin.neutral(model.model), np.zeros(7), np.zeros(7), 1e-3)
+        self.reset()
 
     def reset(self) -> None:
         self.r = np.zeros(7)
@@ -168,6 +296,39 @@ class ExternalForceObserver:
 
     def update(self, q: np.ndarray, dq: np.ndarray, tau_J: np.ndarray, dt: float) -> np.ndarray:
         """Advance one tick with the measured joint torques; returns the external force (N, {B})."""
+        m, d = self.model.model, self._data
+        # The bound kernel takes C-contiguous float64 vectors of the model's size, exactly.
+        q = np.ascontiguousarray(q, dtype=float)
+        dq = np.ascontiguousarray(dq, dtype=float)
+        tau_J = np.ascontiguousarray(tau_J, dtype=float)
+        nv = m.nv
+        if dq.shape != (nv,) or tau_J.shape != (nv,):
+            dq, tau_J = (np.ascontiguousarray(np.broadcast_to(x, (nv,)), dtype=float) for x in (dq, tau_J))
+        M = np.ascontiguousarray(pin.crba(m, d, q))
+        C = np.ascontiguousarray(pin.computeCoriolisMatrix(m, d, q, dq))
+        g = np.ascontiguousarray(pin.computeGeneralizedGravity(m, d, q))
+        J = np.ascontiguousarray(
+            pin.computeFrameJacobian(m, d, q, self.model.frame_E, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        )
+        first = self._p0 is None
+        if first:
+            self._p0 = np.empty(nv)
+        r_new = np.empty(nv)
+        force = np.empty(3)
+        args = (
+            M, C, g, J, dq, tau_J, np.ascontiguousarray(self.r, dtype=float), float(dt), float(self.gain),
+            float(self.damping) ** 2, first, self._p0, self._integral, r_new, force,
+        )  # fmt: skip
+        if self._step is None:
+            self._step = bind(_observer_step, *args)
+        ok = self._step(*args)
+        self.r = r_new
+        if not ok:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return force
+
+    def update_reference(self, q: np.ndarray, dq: np.ndarray, tau_J: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`update` written out in numpy (the uncompiled reference the tests compare with)."""
         m, d = self.model.model, self._data
         M = pin.crba(m, d, q).copy()
         M[self._lower] = M.T[self._lower]
