@@ -129,8 +129,8 @@ def test_a_name_that_cannot_be_announced_is_retried(bus: Bus) -> None:
 
 
 def test_shared_inputs_flag_corrupt_slots(bus: Bus) -> None:
-    tac = ShmInput(bus.slot("tactile"), "tactile")
-    ins = ShmInput(bus.slot("instruments"), "instruments")
+    tac = ShmInput(bus.slot("tactile"), "tactile", clock=lambda: 10.0)
+    ins = ShmInput(bus.slot("instruments"), "instruments", clock=lambda: 10.0)
     assert tac.refresh(10.0) is None and tac.get_fresh(0.1, 10.0) is None  # nothing yet: stale
     bus.slot("tactile").write(np.full(64, 40.0), 9.95)
     assert tac.refresh(10.0) is None

@@ -11,7 +11,7 @@ import pytest
 from lapwrench.config import load
 from lapwrench.perception import Detection, DetectorConfig
 from lapwrench.perception.async_detect import SimulatedAsyncDetector, ThreadedAsyncDetector
-from lapwrench.robot.limits import JointLimits
+from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import InputValidator, InstrumentObservation, SensorFrame
 
 FRAME = np.zeros((480, 640, 3), np.uint8)
@@ -98,7 +98,7 @@ def test_max_age_drops_stale_results():
 
 def test_controller_validator_drops_old_detections():
     cfg = load()
-    limits = JointLimits.__new__(JointLimits)  # not used for image points
+    limits = RobotModel().limits  # not used for image points
     val = InputValidator(cfg.interaction, cfg.camera, limits, max_image_age=cfg.inputs.max_image_age)
     adet = SimulatedAsyncDetector(FakeDetector(), latency=0.03)
     adet.offer(0.0, frame(0))

@@ -92,7 +92,8 @@ def test_shortened_hard_push_in_the_demo_report(tmp_path: Path, monkeypatch: pyt
         return results["res"]
 
     monkeypatch.setitem(demo_mod.SCENARIOS, "hard-push", reduced)
-    plan = demo_mod.plan_demo(tmp_path, ["hard-push"], time_scale=TIME_SCALE, video=False)
+    # one worker: the patched scenario table lives in this process only
+    plan = demo_mod.plan_demo(tmp_path, ["hard-push"], time_scale=TIME_SCALE, video=False, workers=1)
     assert plan.configs["hard-push"] == load()  # the shipped defaults
     demo_mod.run_demo(plan, progress=False)  # no exception escapes: holds are rows of the table
 

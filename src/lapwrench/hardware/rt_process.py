@@ -310,10 +310,10 @@ class ShmInput:
     latest-value buffer (``get_fresh``). :meth:`refresh` reads and checks the slot once per cycle
     (in the loop's ``pre_cycle``); it returns a message when the slot holds corrupt data."""
 
-    def __init__(self, slot: SeqlockSlot, kind: str) -> None:
+    def __init__(self, slot: SeqlockSlot, kind: str, clock: Callable[[], float] = time.monotonic) -> None:
         if kind not in ("tactile", "instruments"):
             raise ValueError(f"unknown shared input {kind!r}")
-        self.slot, self.kind = slot, kind
+        self.slot, self.kind, self.clock = slot, kind, clock
         self._buf = np.empty_like(slot.data)
         self._seq = 0
         self._sample: Sample[Any] | None = None
@@ -345,7 +345,7 @@ class ShmInput:
         problem = None
         # compared with the clock read now, not the cycle's start: a writer may publish while this
         # process is preempted between the two (seen under load), which is no corruption
-        if not (math.isfinite(stamp) and stamp <= time.monotonic() + 0.005):
+        if not (math.isfinite(stamp) and stamp <= self.clock() + 0.005):
             problem = f"sample stamp {stamp!r} is not a past monotonic time"
         elif self.kind == "tactile":
             if count != TACTILE_N or not np.all(np.isfinite(b)):

@@ -165,13 +165,18 @@ def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, Scenario
     queue = ctx.Queue()
     with ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)) as pool:
         order = sorted(names, key=lambda n: -SIM_SECONDS.get(n, 15.0))
-        pending = {pool.submit(_task, n, plan) for n in order}
+        names_of = {pool.submit(_task, n, plan): n for n in order}
+        pending = set(names_of)
         bar.set_postfix_str(f"{plan.workers} workers")
         while pending:
             done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
             _drain(queue, bar)
             for f in done:
-                name, res, err = f.result()
+                try:
+                    name, res, err = f.result()
+                except Exception as exc:  # a worker that crashed or raised something unexpected
+                    name, res = names_of[f], ""
+                    err = f"scenario '{name}' failed in its worker process: {type(exc).__name__}: {exc}"
                 if err:
                     for p in pending:
                         p.cancel()
