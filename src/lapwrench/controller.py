@@ -145,7 +145,7 @@ class Controller:
             0.0, ForceTorqueReading(np.array([1.0, 0.0, 0.0]), z, 0.0), TactileReading(np.full(64, 50.0), 0.0),
             InstrumentObservation(np.array([[100.0, 100.0]]), 0.0), RobotReading(q, np.zeros(7), z, 0.0),
         )
-        hook, self.bounds_hook = self.bounds_hook, lambda ref, lo, hi: (lo, hi)
+        hook, self.bounds_hook = self.bounds_hook, lambda ref, lo, hi: (lo, lo + 1e-3)  # a narrow box: a QP
         try:
             self.tick(frame)
         finally:

@@ -266,6 +266,10 @@ class SafetySupervisor:
         self._v = np.zeros(7)
         self._a = np.zeros(7)
         self._started = False
+        # load the compiled checks now, not in the first cycle
+        z = np.zeros(7)
+        command_violation(z, z, z, z, self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
+        nearest_limit(z, self._lo, self._hi)
 
     # -- state --------------------------------------------------------------------------------
     def start(self, q0: Vec, time: float = 0.0) -> None:
