@@ -196,3 +196,16 @@ def test_runner_with_stale_sources_never_waits(sim_world: Any, panda_cfg: Any) -
     stale = [m for _, k, m in log.events if k == "input_stale"]
     assert any(m.startswith("ft") for m in stale) and any(m.startswith("tactile") for m in stale)
     assert np.percentile(stats.compute_us, 50) < 5000
+
+
+@pytest.mark.parametrize("rate", [500, 250, 2000])
+def test_run_refuses_a_control_rate_the_franka_does_not_run_at(
+    tmp_path: Path, rate: int, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Franka differentiates every command over 1 ms: any other configured rate would let the
+    shaper and the supervisor work with a wrong period (issue 11, item 1)."""
+    cfg = tmp_path / "rate.yaml"
+    cfg.write_text(f"robot: {{control_rate_hz: {rate}}}\n")
+    code = hw.run_main(run_args(dry_run=True, config=str(cfg), duration=1))
+    err = capsys.readouterr().err
+    assert code == 2 and "control_rate_hz must be 1000" in err

@@ -170,3 +170,10 @@ def test_a_scenario_failing_in_a_worker_process_stops_the_demo(tmp_path: Path) -
     with pytest.raises(demo_mod.DemoError, match=r"rcm-disturbance.*stopped"):
         demo_mod.run_demo(bad, progress=False)
     assert (tmp_path / "FAILED.txt").exists() and not (tmp_path / "report.md").exists()
+
+
+def test_demo_refuses_a_control_rate_other_than_the_simulated_franka(tmp_path: Path) -> None:
+    cfg = tmp_path / "rate.yaml"
+    cfg.write_text("robot: {control_rate_hz: 500}\n")
+    with pytest.raises(demo_mod.DemoError, match="control_rate_hz must be 1000"):
+        demo_mod.plan_demo(tmp_path / "out", config=str(cfg))

@@ -282,6 +282,9 @@ def _open_sources(
     return sources, described
 
 
+FRANKA_RATE_HZ = 1000.0
+
+
 def run_main(args: argparse.Namespace) -> int:
     """``lapwrench run``. Returns the exit code (see the module docstring)."""
     from lapwrench import config as config_mod
@@ -299,6 +302,15 @@ def run_main(args: argparse.Namespace) -> int:
         return 2
     if args.duration is not None and not args.duration > 0:
         print("lapwrench run: --duration must be positive", file=sys.stderr)
+        return 2
+    if cfg.robot.control_rate_hz != FRANKA_RATE_HZ:
+        # the shaper and the supervisor would use the configured period while the robot
+        # differentiates over 1 ms: at 500 Hz the commands ask 3.6x its acceleration limit
+        print(
+            f"lapwrench run: robot.control_rate_hz must be {FRANKA_RATE_HZ:.0f} (the Franka differentiates every "
+            f"command over 1 ms), got {cfg.robot.control_rate_hz}",
+            file=sys.stderr,
+        )
         return 2
     if getattr(args, "in_process", False):
         if frankysim:

@@ -28,7 +28,7 @@ from lapwrench import config as config_mod
 from lapwrench.sim import report
 from lapwrench.sim.loop import SafetyStopError
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions, ScenarioResult, needle_search
-from lapwrench.sim.world import SimulationUnstableError
+from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError
 
 TRACKING_SCENARIOS = ("needle-search", "workflow")
 
@@ -86,6 +86,12 @@ def plan_demo(
         tracking = config_mod.load(tracking_config or config)
     except config_mod.ConfigError as exc:
         raise DemoError(str(exc)) from exc
+    for c in (base, tracking):
+        if c.robot.control_rate_hz != 1.0 / CONTROL_DT:
+            raise DemoError(
+                f"robot.control_rate_hz must be {1.0 / CONTROL_DT:.0f} (the simulated Franka runs at 1 kHz), "
+                f"got {c.robot.control_rate_hz}"
+            )
     try:
         out = config_mod.ensure_writable_dir(out)
     except OSError as exc:
