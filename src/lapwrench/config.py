@@ -176,6 +176,7 @@ class SafetyConfig:
 class InputsConfig:
     max_rcm_error: float = _positive(default=0.02)
     max_image_age: float = _positive(default=0.2)
+    max_instruments: int = _positive(default=8)  # more detections in one frame are a detector fault: none used
 
 
 @dataclass(frozen=True)

@@ -105,7 +105,8 @@ class Controller:
         self.model = model or RobotModel(cfg.robot.kind, ScopeGeometry.from_config(cfg.scope))
         self.dt = cfg.robot.dt
         self.validator = InputValidator(
-            cfg.interaction, cfg.camera, self.model.limits, cfg.inputs.max_image_age
+            cfg.interaction, cfg.camera, self.model.limits, cfg.inputs.max_image_age,
+            max_instruments=cfg.inputs.max_instruments,
         )
         self.params = TickParams.from_config(cfg, self.model.limits)
         self.extra_sources: list[WrenchSource] = list(extra_sources)

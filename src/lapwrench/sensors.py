@@ -90,15 +90,24 @@ class ValidInputs:
     events: list[InputEvent] = field(default_factory=list)
 
 
+def _real_array(x: object) -> np.ndarray | None:
+    """``x`` as a C-contiguous float64 array if it holds real numbers (ints or floats; not strings,
+    booleans, complex values or objects), else None."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
+        return x
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError):  # ragged nesting, unconvertible objects
+        return None
+    if a.dtype.kind not in "fiu":
+        return None
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
-        return x if x.shape == (n,) else None
-    try:
-        a = np.ascontiguousarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    return a if a.shape == (n,) else None
+    a = _real_array(x)
+    return a if a is not None and a.shape == (n,) else None
 
 
 def _fresh(stamp: object, now: float, max_age: float) -> bool:
@@ -173,6 +182,7 @@ class InputValidator:
         position_tolerance: float = 0.02,
         velocity_factor: float = 1.5,
         max_external_force: float = 300.0,
+        max_instruments: int = 8,
     ) -> None:
         self.interaction = interaction
         self.camera = camera
@@ -181,6 +191,7 @@ class InputValidator:
         self.position_tolerance = position_tolerance
         self.velocity_factor = velocity_factor
         self.max_external_force = max_external_force
+        self.max_instruments = max_instruments
         self._q_lo = np.ascontiguousarray(limits.position_lower, dtype=np.float64)
         self._q_hi = np.ascontiguousarray(limits.position_upper, dtype=np.float64)
         self._dq_max = np.ascontiguousarray(velocity_factor * limits.velocity, dtype=np.float64)
@@ -249,14 +260,15 @@ class InputValidator:
 
     def _instruments(self, frame: SensorFrame, reject: Callable[[str, str], None]) -> InstrumentObservation | None:
         assert frame.instruments is not None
-        raw = frame.instruments.points
         cam = self.camera
-        try:
-            pts = np.ascontiguousarray(raw, dtype=np.float64)
-        except (TypeError, ValueError):
-            pts = None
+        pts = _real_array(frame.instruments.points)
         if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
-            reject("instruments", "image points must be (n, 2)")
+            reject("instruments", "image points must be (n, 2) real numbers")
+            return None
+        if len(pts) > self.max_instruments:
+            # eq (8) sums over every detection: 100 at one corner would ask 1000 N of the scope
+            n, most = len(pts), self.max_instruments
+            reject("instruments", f"{n} detections in one frame (at most {most}): a detector fault")
             return None
         status = points_status(pts, float(cam.width), float(cam.height))
         if status == NOT_FINITE:

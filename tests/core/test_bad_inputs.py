@@ -36,12 +36,18 @@ BAD = {
         ForceTorqueReading(np.array([500.0, 0, 0]), np.zeros(3)),
         ForceTorqueReading(np.zeros(3), np.array([0, 0, 50.0])),
         ForceTorqueReading(np.zeros(2), np.zeros(3)),
+        ForceTorqueReading(np.array(["5", "0", "0"]), np.zeros(3)),  # numeric strings are not numbers
+        ForceTorqueReading(np.array([5.0 + 1j, 0, 0]), np.zeros(3)),  # complex
+        ForceTorqueReading(None, np.zeros(3)),  # type: ignore[arg-type]
+        ForceTorqueReading([[5.0, 0.0], [0.0]], np.zeros(3)),  # type: ignore[arg-type]  # ragged
     ],
     "tactile": [
         TactileReading(np.full(64, NAN)),
         TactileReading(np.full(64, 300.0)),
         TactileReading(np.full(64, -1.0)),
         TactileReading(np.full(63, 100.0)),
+        TactileReading(np.full(64, True)),  # booleans are not pressures
+        TactileReading(["62.5"] * 64),  # type: ignore[arg-type]
     ],
     "instruments": [
         InstrumentObservation(np.array([[NAN, 100.0]])),
@@ -49,6 +55,9 @@ BAD = {
         InstrumentObservation(np.array([[700.0, 100.0]])),
         InstrumentObservation(np.array([[-5.0, 100.0]])),
         InstrumentObservation(np.array([1.0, 2.0, 3.0])),
+        InstrumentObservation([[600.0, 400.0], [100.0]]),  # type: ignore[arg-type]  # ragged
+        InstrumentObservation([["600", "400"]]),  # type: ignore[arg-type]
+        InstrumentObservation(np.tile([[600.0, 400.0]], (100, 1))),  # 100 at one corner: 1000 N by eq 8
     ],
 }
 WRENCH_OF = {"ft": "interaction", "tactile": "interaction", "instruments": "tracking"}
@@ -148,3 +157,19 @@ def test_event_memory_is_bounded_but_every_event_is_counted() -> None:
         ctrl.tick(SensorFrame(k * 1e-3, tactile=bad))
     assert len(ctrl.events) == MAX_KEPT_EVENTS
     assert ctrl.event_counts["tactile"] == n
+
+
+@pytest.mark.parametrize("stamp", [None, "0.1", float("nan"), 39.0, -39.0])
+def test_a_detection_with_a_bad_stamp_is_not_used(stamp: object) -> None:
+    """No stamp, a string, NaN, 39 s in the future or in the past: the detection is dropped with an event."""
+    ctrl = Controller(load())
+    ctrl.reset(DEFAULT_Q0)
+    res = ctrl.tick(_frame(0.0, instruments=InstrumentObservation(FAR.points, stamp)))  # type: ignore[arg-type]
+    assert not np.any(res.wrenches["tracking"]) and any(e.source == "instruments" for e in res.events)
+
+
+def test_a_nan_frame_time_uses_no_detection() -> None:
+    ctrl = Controller(load())
+    ctrl.reset(DEFAULT_Q0)
+    res = ctrl.tick(SensorFrame(float("nan"), ft=FT, tactile=GRIP, instruments=InstrumentObservation(FAR.points, 0.0)))
+    assert not np.any(res.wrenches["tracking"])
