@@ -114,7 +114,9 @@ def test_lapwrench_run_with_a_camera_runs_the_detector_in_its_own_process(tmp_pa
     log = tmp_path / "run.mcap"
     args = p.parse_args(
         ["--dry-run", "--duration", "2", "--camera", str(video), "--detector", str(SHIPPED_MODEL), "--log", str(log),
-         "--max-misses", "0", "--rt-priority", "0"]
+         "--max-misses", "0", "--rt-priority", "0",
+         # generous hang timeouts: this test is about detections reaching the loop, on a busy CI machine
+         "--feeder-timeout", "5", "--detector-timeout", "5"]
     )
     import contextlib
     import io

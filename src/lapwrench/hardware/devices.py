@@ -1,0 +1,282 @@
+"""The devices of ``lapwrench run``: parsing their specs, opening and checking them, and the simulated
+ones of ``--dry-run`` / ``--frankysim`` (the scripted surgeon, a simulated F/T box in its own process,
+a simulated tactile array on a pty)."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import functools
+import math
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import urlsplit
+
+import numpy as np
+
+
+class CliError(Exception):
+    """An argument or device problem reported as ``lapwrench run: <message>`` with exit code 2."""
+
+
+# -- device specs -------------------------------------------------------------------------------
+def parse_ft_url(url: str) -> tuple[str, str, int]:
+    """``hex://HOST[:PORT]`` / ``ati://HOST[:PORT]`` → (kind, host, port)."""
+    parts = urlsplit(url)
+    if parts.scheme not in ("hex", "ati") or not parts.hostname:
+        raise CliError(f"--ft must be hex://HOST[:PORT] or ati://HOST[:PORT], got {url!r}")
+    try:
+        port = parts.port or 49152
+    except ValueError as exc:
+        raise CliError(f"--ft {url!r}: bad port") from exc
+    return parts.scheme, parts.hostname, port
+
+
+def parse_camera(spec: str) -> int | str:
+    """A device index for digits, otherwise the file path or URL."""
+    return int(spec) if spec.isdigit() else spec
+
+
+# -- the dry-run script ---------------------------------------------------------------------------
+@dataclass
+class DryRunScript:
+    """The scripted surgeon of ``--dry-run`` (times in s since the script's start, wall clock).
+
+    The handle is untouched for ``tare_s`` (the F/T tare happens then), gripped from ``grip[0]`` to
+    ``grip[1]``, and pushed with the force segments ``(t_start, t_end, force in {H})``.
+    """
+
+    tare_s: float = 1.0
+    grip: tuple[float, float] = (1.2, 5.8)
+    grip_value: int = 40
+    pushes: list[tuple[float, float, tuple[float, float, float]]] = field(
+        default_factory=lambda: [(1.5, 3.5, (6.0, 0.0, 0.0)), (4.0, 5.5, (0.0, -5.0, 0.0))]
+    )
+    t0: float = field(default_factory=time.monotonic)
+
+    def now(self) -> float:
+        return time.monotonic() - self.t0
+
+    def force_H(self, t: float | None = None) -> np.ndarray:
+        t = self.now() if t is None else t
+        for a, b, f in self.pushes:
+            if a <= t < b:
+                return np.array(f, dtype=float)
+        return np.zeros(3)
+
+    def tactile(self, t: float | None = None) -> np.ndarray:
+        t = self.now() if t is None else t
+        on = self.grip[0] <= t < self.grip[1]
+        return np.full(64, self.grip_value if on else 0, dtype=np.uint8)
+
+
+class _TactileWriter:
+    """Writes tactile frames of a script to a pty master at ``rate_hz`` (the simulated grip array)."""
+
+    def __init__(self, fd: int, values: Callable[[], np.ndarray], rate_hz: float = 200.0) -> None:
+        from lapwrench.drivers.tactile import TactileFrameFormat
+
+        self.fd = fd
+        self.values = values
+        self.period = 1.0 / rate_hz
+        self.fmt = TactileFrameFormat()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="lapwrench-sim-tactile", daemon=True)
+
+    def start(self) -> _TactileWriter:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with contextlib.suppress(OSError):
+                os.write(self.fd, self.fmt.encode(self.values()))
+            self._stop.wait(self.period)
+
+
+# -- opened devices ---------------------------------------------------------------------------------
+class _Devices:
+    """Opened devices, closed in reverse order."""
+
+    def __init__(self) -> None:
+        self._closers: list[Callable[[], None]] = []
+
+    def add(self, closer: Callable[[], None]) -> None:
+        self._closers.append(closer)
+
+    def close(self) -> None:
+        while self._closers:
+            with contextlib.suppress(Exception):
+                self._closers.pop()()
+
+
+def _open_sources(
+    args: argparse.Namespace, cfg: Any, devices: _Devices, script: DryRunScript | None
+) -> tuple[Any, dict[str, str]]:
+    """Open, check and start every sensor source; return (Sources, device descriptions).
+
+    The camera's frames must have the size of the configured intrinsics (``camera.width`` x
+    ``camera.height``), which the tracking wrench projects with: a mismatch fails at start.
+    """
+    from lapwrench.drivers import AtiNetFTSensor, DeviceError, OnRobotHexSensor, SerialTactileArray
+    from lapwrench.hardware.runner import DetectorWorker, Sources
+
+    sources = Sources()
+    described: dict[str, str] = {}
+    ft_url, tactile_port = args.ft, args.tactile
+    if script is not None:
+        from lapwrench.drivers.fakes import FakeFTDevice
+
+        def counts(_i: int) -> np.ndarray:
+            f = script.force_H()
+            return np.concatenate([f * 10000.0, np.zeros(3)]).round()
+
+        fake = FakeFTDevice(rate_hz=1000.0, counts_fn=counts).start()
+        devices.add(fake.close)
+        ft_url = f"hex://127.0.0.1:{fake.port}"
+        master, slave = os.openpty()
+        devices.add(lambda: (os.close(master), os.close(slave)))
+        writer = _TactileWriter(master, script.tactile).start()
+        devices.add(writer.stop)
+        tactile_port = os.ttyname(slave)
+    try:
+        if ft_url:
+            kind, host, port = parse_ft_url(ft_url)
+            cls = OnRobotHexSensor if kind == "hex" else AtiNetFTSensor
+            ft = cls(host, port)
+            ft.start()
+            devices.add(ft.stop)
+            if not args.no_tare:
+                ft.tare(n_samples=100)
+            sources.ft = ft.buffer
+            described["ft"] = ft.device
+        if tactile_port:
+            tac = SerialTactileArray(tactile_port, args.tactile_baud)
+            tac.start()
+            devices.add(tac.stop)
+            if tac.buffer.wait_newer(0, timeout=2.0) is None:
+                raise DeviceError(tac.device, "no valid tactile frame within 2 s (format or baud rate?)")
+            sources.tactile = tac.buffer
+            described["tactile"] = tac.device
+        if args.camera is not None:
+            from lapwrench.drivers.camera import Camera
+            from lapwrench.perception import DetectorConfig, PerceptionError, make_detector
+
+            size = (cfg.camera.width, cfg.camera.height)
+            cam = Camera(parse_camera(args.camera), loop=True, expected_size=size)
+            cam.start()
+            devices.add(cam.stop)
+            try:
+                detector = make_detector(args.detector, DetectorConfig(frame_size=size))
+            except (PerceptionError, ImportError) as exc:
+                raise CliError(f"instrument detector {args.detector!r}: {exc}") from exc
+            worker = DetectorWorker(cam.buffer, detector).start()
+            devices.add(worker.stop)
+            sources.instruments = worker.buffer
+            described["camera"] = cam.device
+    except DeviceError as exc:
+        raise CliError(f"device not ready: {exc}") from exc
+    return sources, described
+
+
+# -- the simulated F/T box in its own process, and the dry run's simulated devices ------------------
+def _force_counts(force_fn: Callable[[float], Any], t0: Any, _i: int) -> np.ndarray:
+    f = np.asarray(force_fn(time.monotonic() - t0.value), dtype=float)
+    return np.concatenate([f * 10000.0, np.zeros(3)]).round()
+
+
+def _fake_ft_main(
+    force_fn: Callable[[float], Any], t0: Any, rate_hz: float, conn: Any, fifo_priority: int | None = None
+) -> None:
+    import multiprocessing as mp
+
+    from lapwrench.drivers.fakes import FakeFTDevice
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if fifo_priority:  # it stands for a device with a CPU of its own: keep it off our CPU contention
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo_priority))
+    dev = FakeFTDevice(rate_hz=rate_hz, counts_fn=functools.partial(_force_counts, force_fn, t0)).start()
+    try:
+        conn.send(dev.port)
+        parent = mp.parent_process()
+        while not conn.poll(0.1):
+            if parent is not None and not parent.is_alive():
+                break
+    finally:
+        dev.close()
+
+
+class FakeFTProcess:
+    """A simulated OnRobot HEX box (:class:`~lapwrench.drivers.fakes.FakeFTDevice`, 10000 counts/N) in
+    its own process, streaming ``force_fn(t)`` (N, in {H}) at ``rate_hz`` on 127.0.0.1; ``t`` counts
+    from :meth:`set_t0` (before it, ``-inf``). A real box does not share this process's interpreter,
+    so neither does this one (its sends are not delayed by this process's threads). ``fifo_priority``
+    (when permitted) keeps the simulated box off our own CPU contention, as a real box has its own CPU."""
+
+    def __init__(
+        self, force_fn: Callable[[float], Any], rate_hz: float = 1000.0, fifo_priority: int | None = None
+    ) -> None:
+        import multiprocessing as mp
+
+        self.ctx = mp.get_context("spawn")
+        self.t0 = self.ctx.RawValue("d", math.inf)
+        self.force_fn = force_fn
+        self.rate_hz = rate_hz
+        self.fifo_priority = fifo_priority
+        self.proc: Any = None
+        self.port = 0
+        self._conn: Any = None
+
+    def start(self, timeout: float = 30.0) -> FakeFTProcess:
+        self._conn, child = self.ctx.Pipe()
+        self.proc = self.ctx.Process(
+            target=_fake_ft_main,
+            args=(self.force_fn, self.t0, self.rate_hz, child, self.fifo_priority),
+            name="lapwrench-fake-ft",
+            daemon=True,
+        )
+        self.proc.start()
+        child.close()
+        if not self._conn.poll(timeout):
+            self.close()
+            raise CliError("the simulated F/T box did not start")
+        self.port = int(self._conn.recv())
+        return self
+
+    def set_t0(self, t0: float) -> None:
+        self.t0.value = t0
+
+    def close(self) -> None:
+        if self.proc is None:
+            return
+        with contextlib.suppress(Exception):
+            self._conn.send("stop")
+        self.proc.join(3.0)
+        if self.proc.exitcode is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.proc.pid, signal.SIGKILL)
+            self.proc.join(2.0)
+        with contextlib.suppress(Exception):
+            self._conn.close()
+        self.proc = None
+
+
+def _simulated_devices(devices: _Devices, script: DryRunScript) -> tuple[str, str, FakeFTProcess]:
+    """The dry run's F/T box (loopback UDP, own process) and tactile array (a pty)."""
+    fake = FakeFTProcess(script.force_H).start()
+    devices.add(fake.close)
+    master, slave = os.openpty()
+    devices.add(lambda: (os.close(master), os.close(slave)))
+    writer = _TactileWriter(master, script.tactile).start()
+    devices.add(writer.stop)
+    return f"hex://127.0.0.1:{fake.port}", os.ttyname(slave), fake

@@ -1,0 +1,243 @@
+"""The real-time child: its entry point (:func:`_child_main`, spawned by
+:class:`~lapwrench.hardware.rt.parent.RtProcess`) and the hooks it runs each cycle."""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import signal
+import time
+import traceback
+import warnings
+from typing import Any
+
+import numpy as np
+
+from lapwrench.hardware.rt.bus import (
+    BEAT_CHILD,
+    BEAT_PARENT,
+    CTL_CYCLES,
+    CTL_PHASE,
+    CTL_STOP,
+    PHASE_DONE,
+    PHASE_READY,
+    PHASE_RUNNING,
+    bus_layout,
+)
+from lapwrench.hardware.rt.codec import ShmLogSink
+from lapwrench.hardware.rt.inputs import ShmInput
+from lapwrench.hardware.rt.options import apply_realtime
+from lapwrench.hardware.rt.peers import PeerSpec, PeerWatch
+from lapwrench.hardware.rt.spec import FtSpec, RtSpec
+from lapwrench.hardware.shm import Bus
+from lapwrench.robot.interface import RobotError
+
+
+class _CycleHooks:
+    """The child's ``pre_cycle``: heartbeat, F/T drain, shared inputs, peer watch."""
+
+    def __init__(self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch) -> None:
+        self.ctl, self.beat = bus["ctl"], bus["beat"]
+        self.ft, self.ft_max_age = ft, ft_max_age
+        self.inputs = inputs
+        self.watch = watch
+        self.loop: Any = None
+        self.cycles = 0
+        self.ft_fresh = 0
+        self.ft_datagrams = 0
+        self.fault: str | None = None
+
+    def _alarm(self, now: float, kind: str, message: str) -> None:
+        if self.fault is None:
+            self.fault = f"{kind}: {message}"
+            self.loop.supervisor.raise_alarm(self.loop.session_time(now), kind, message)
+
+    def __call__(self, now: float) -> None:
+        self.beat[BEAT_CHILD] = now
+        self.cycles += 1
+        self.ctl[CTL_CYCLES] = self.cycles
+        ft = self.ft
+        if ft is not None:
+            self.ft_datagrams += ft.drain(now)
+            s = ft.buffer.get()
+            if s is not None and now - s.timestamp <= self.ft_max_age:
+                self.ft_fresh += 1
+        for inp in self.inputs.values():
+            problem = inp.refresh(now)
+            if problem is not None:
+                inp.kill()
+                self._alarm(now, "ipc_corrupt", f"{problem}; its input is off")
+        hit = self.watch.check(now)
+        if hit is not None:
+            message, peer = hit
+            for name in ("tactile",) if peer.beat == BEAT_PARENT else ("instruments",):
+                if name in self.inputs:
+                    self.inputs[name].kill()
+            kind = "peer_died" if "exited" in message else "peer_hung"
+            self._alarm(now, kind, f"{message}; its inputs are stale")
+            self.watch.peers = [p for p in self.watch.peers if p is not peer]
+
+    def report(self) -> dict[str, Any]:
+        return {
+            "ft_fresh_cycles": self.ft_fresh,
+            "hook_cycles": self.cycles,
+            "ft_datagrams": self.ft_datagrams,
+            "peer_fault": self.fault,
+            "torn_reads": {k: v.torn for k, v in self.inputs.items()},
+        }
+
+
+class _StopFlag:
+    """``is_set()`` for ControlLoop.run: the parent's stop request or this process's SIGTERM."""
+
+    def __init__(self, ctl: np.ndarray) -> None:
+        self.ctl = ctl
+        self.term = False
+
+    def is_set(self) -> bool:
+        return self.term or bool(self.ctl[CTL_STOP])
+
+
+def _open_ft(spec: FtSpec) -> Any:
+    from lapwrench.drivers.ft import AtiNetFTSensor, OnRobotHexSensor
+
+    cls = OnRobotHexSensor if spec.kind == "hex" else AtiNetFTSensor
+    ft = cls(spec.host, spec.port)
+    ft.start_polled()
+    if spec.tare:
+        try:
+            ft.tare(n_samples=spec.tare_samples)
+        except BaseException:
+            ft.stop()
+            raise
+    return ft
+
+
+def _warm_up(ctrl: Any, spec: RtSpec) -> None:
+    """Run the loop's own per-cycle code once outside the loop (first calls compile or allocate:
+    measured 22 ms for the first ``measure_scope``), on throwaway state."""
+    from lapwrench.hardware.supervisor import SafetySupervisor, measure_scope
+    from lapwrench.virtual import DEFAULT_Q0
+
+    q = np.array(DEFAULT_Q0, dtype=float)
+    scope = measure_scope(ctrl.model, q, np.zeros(3))
+    sup = SafetySupervisor(ctrl.model.limits, spec.cfg.robot.dt, spec.supervisor)
+    sup.start(q)
+    for _ in range(3):
+        sup.filter(0.0, q, rcm_error=scope.rcm_error, depth=scope.depth, residual=np.zeros(3), q_measured=q,
+                   compute_time=0.0)
+
+
+def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -> None:
+    """Entry point of the real-time process."""
+    from lapwrench.controller import Controller
+    from lapwrench.drivers.base import DeviceError
+    from lapwrench.hardware.runner import ControlLoop, Sources
+    from lapwrench.hardware.supervisor import SafetySupervisor
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which asks for the stop
+    stop_flag: _StopFlag | None = None
+    pending_term = [False]
+
+    def on_term(signum: int, frame: Any) -> None:
+        pending_term[0] = True
+        if stop_flag is not None:
+            stop_flag.term = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    bus = ft = watch = None
+    try:
+        bus = Bus.attach(bus_name, bus_layout(spec.log_rows, spec.event_rows))
+        ctl = bus["ctl"]
+        stop_flag = _StopFlag(ctl)
+        stop_flag.term = pending_term[0]
+        sink = ShmLogSink(bus.ring("log"), bus.ring("events"), cycles=spec.log_cycles)
+        problems = apply_realtime(spec.rt)
+        for p in problems:
+            sink.event(0.0, "rt_setup", p)
+            if spec.rt.warn:
+                warnings.warn(f"lapwrench real-time process: {p}", RuntimeWarning, stacklevel=1)
+        ctrl = Controller(spec.cfg)
+        sup = SafetySupervisor(ctrl.model.limits, spec.cfg.robot.dt, spec.supervisor)
+        _warm_up(ctrl, spec)
+        devices: dict[str, str] = {}
+        if spec.ft is not None:
+            ft = _open_ft(spec.ft)
+            devices["ft"] = ft.device
+        robot = spec.robot_factory(spec.cfg, spec.script)
+        inputs: dict[str, ShmInput] = {}
+        if spec.tactile:
+            inputs["tactile"] = ShmInput(bus.slot("tactile"), "tactile")
+        if spec.instruments:
+            inputs["instruments"] = ShmInput(bus.slot("instruments"), "instruments")
+        watch = PeerWatch(bus["beat"], peers)
+        hooks = _CycleHooks(bus, ft, spec.ages.ft, inputs, watch)
+        sources = Sources(
+            ft=None if ft is None else ft.buffer, tactile=inputs.get("tactile"), instruments=inputs.get("instruments")
+        )
+        loop = ControlLoop(
+            robot,
+            ctrl,
+            sup,
+            sources,  # type: ignore[arg-type]
+            ages=spec.ages,
+            logger=sink,  # type: ignore[arg-type]
+            pre_cycle=hooks,
+            gc_freeze=spec.rt.gc_freeze,
+            stop_timeout=spec.stop_timeout,
+        )
+        hooks.loop = loop
+        extra = spec.loop_hook(loop) if spec.loop_hook is not None else None
+        ctl[CTL_PHASE] = PHASE_READY
+        conn.send(("ready", {"robot": getattr(robot, "device", type(robot).__name__), "devices": devices,
+                             "rt_problems": problems, "pid": os.getpid()}))
+        parent = mp.parent_process()
+        while not conn.poll(0.02):  # wait for "go"; give up if the parent is gone
+            bus["beat"][BEAT_CHILD] = time.monotonic()
+            if (parent is not None and not parent.is_alive()) or stop_flag.is_set():
+                return
+        msg = conn.recv()
+        if msg[0] != "go":
+            return
+        _, script_t0, duration = msg
+        if spec.script is not None and script_t0 is not None:
+            spec.script.t0 = script_t0
+        loop.start(spec.p_R)
+        if ft is not None:  # what queued up since the tare, read here rather than in the first cycle
+            while ft.drain() > 0:
+                pass
+        now = time.monotonic()
+        watch.arm(now)
+        bus["beat"][BEAT_CHILD] = now
+        ctl[CTL_PHASE] = PHASE_RUNNING
+        stats = loop.run(duration, stop_flag)  # type: ignore[arg-type]
+        ctl[CTL_PHASE] = PHASE_DONE
+        report = hooks.report()
+        report.update(log_dropped=bus.ring("log").dropped, events_dropped=bus.ring("events").dropped,
+                      encode_errors=sink.encode_errors)
+        if extra is not None and hasattr(extra, "report"):
+            report.update(extra.report())
+        conn.send(("done", stats, report))
+    except RobotError as exc:
+        _send(conn, ("error", "robot", str(exc)))
+    except DeviceError as exc:
+        _send(conn, ("error", "device", str(exc)))
+    except BaseException as exc:  # anything else: reported, never a silent death
+        _send(conn, ("error", "internal", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    finally:
+        if bus is not None:
+            with contextlib.suppress(Exception):
+                bus["ctl"][CTL_PHASE] = PHASE_DONE
+        if watch is not None:
+            watch.close()
+        if ft is not None:
+            with contextlib.suppress(Exception):
+                ft.stop()
+        if bus is not None:
+            bus.close()
+
+
+def _send(conn: Any, msg: Any) -> None:
+    with contextlib.suppress(Exception):
+        conn.send(msg)

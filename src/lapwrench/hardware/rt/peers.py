@@ -1,0 +1,83 @@
+"""The processes the real-time child depends on and their heartbeats (pidfd + heartbeat age)."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import select
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PeerSpec:
+    """A process the child depends on: its heartbeat stamp index on the bus, the heartbeat age
+    that counts as a hang (s), and its pid (watched through a pidfd; ``None``: heartbeat only)."""
+
+    name: str
+    beat: int
+    timeout: float
+    pid: int | None = None
+
+
+class PeerWatch:
+    """Checks every peer each cycle: exited (pidfd readable) or heartbeat too old."""
+
+    def __init__(self, beats: np.ndarray, peers: list[PeerSpec]) -> None:
+        self.beats = beats
+        self.peers = peers
+        self._poll = select.poll()
+        self._fd_peer: dict[int, PeerSpec] = {}
+        self._kill_check: list[PeerSpec] = []
+        for p in peers:
+            if p.pid is None:
+                continue
+            try:
+                fd = os.pidfd_open(p.pid)
+            except (AttributeError, OSError):  # no pidfd (old kernel) or already gone
+                if _pid_alive(p.pid):
+                    self._kill_check.append(p)
+                    continue
+                fd = -1
+            if fd >= 0:
+                self._fd_peer[fd] = p
+                self._poll.register(fd, select.POLLIN)
+        self.armed_at = time.monotonic()
+
+    def arm(self, now: float) -> None:
+        """Heartbeats count from now on (the start-up is not a hang)."""
+        self.armed_at = now
+
+    def check(self, now: float) -> tuple[str, PeerSpec] | None:
+        if self._fd_peer:
+            for fd, _ev in self._poll.poll(0):
+                p = self._fd_peer[fd]
+                return f"{p.name} process (pid {p.pid}) exited", p
+        for p in self._kill_check:
+            if not _pid_alive(p.pid):  # type: ignore[arg-type]
+                return f"{p.name} process (pid {p.pid}) exited", p
+        for p in self.peers:
+            last = max(float(self.beats[p.beat]), self.armed_at)
+            if now - last > p.timeout:
+                age = now - float(self.beats[p.beat]) if self.beats[p.beat] > 0 else math.inf
+                return f"no heartbeat from the {p.name} for {age * 1e3:.0f} ms (> {p.timeout * 1e3:.0f} ms): hung", p
+        return None
+
+    def close(self) -> None:
+        for fd in self._fd_peer:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._fd_peer = {}
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

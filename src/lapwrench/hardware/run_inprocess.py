@@ -1,0 +1,101 @@
+"""``lapwrench run --in-process``: the former single-process loop, for debugging (the sensor and
+detector threads share the GIL with the loop)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+from typing import Any
+
+from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _open_sources
+from lapwrench.hardware.run_common import _error_exit, _install_sigint, _restore_sigint
+
+
+def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
+    """The former single-process loop (``--in-process``): sensor and detector threads share the GIL."""
+    from lapwrench import config as config_mod
+    from lapwrench.robot.interface import RobotError
+
+    devices = _Devices()
+    logger = None
+    script = DryRunScript() if args.dry_run else None
+    try:
+        sources, described = _open_sources(args, cfg, devices, script)
+        loop, robot_desc = _build_loop(args, cfg, sources, script)
+        if args.log:
+            from lapwrench.hardware.log import RunLogger
+
+            logger = RunLogger(
+                args.log,
+                {
+                    "argv": sys.argv,
+                    "robot": robot_desc,
+                    "devices": described,
+                    "dry_run": bool(args.dry_run),
+                    "process": "in-process",
+                    "config": config_mod.to_dict(cfg),
+                },
+            )
+            loop.logger = logger
+        stop = threading.Event()
+        previous = _install_sigint(stop)
+        try:
+            loop.start()
+            print(f"lapwrench run: {robot_desc} connected; devices: {described or 'none'}", file=sys.stderr)
+            stats = loop.run(args.duration, stop)
+        finally:
+            _restore_sigint(previous)
+    except (CliError, RobotError) as exc:
+        return _error_exit(exc)
+    finally:
+        devices.close()
+        if logger is not None:
+            logger.close()
+    summary = {**stats.summary(), "log": args.log, "process": "in-process"}
+    print(json.dumps(summary))
+    return 1 if stats.alarm else 0
+
+
+def _build_loop(
+    args: argparse.Namespace, cfg: Any, sources: Any, script: DryRunScript | None
+) -> tuple[Any, str]:
+    from lapwrench.controller import Controller
+    from lapwrench.hardware.runner import ControlLoop, SourceAges
+    from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+
+    ctrl = Controller(cfg)
+    if script is not None:
+        from lapwrench.sim.robot import SimRobot
+        from lapwrench.sim.scene import SceneConfig
+        from lapwrench.sim.world import SimWorld
+
+        world = SimWorld(SceneConfig.from_config(cfg))
+        robot: Any = SimRobot(world, realtime=True, hand_force_H=lambda _t: script.force_H())
+        desc = robot.device
+    else:
+        from lapwrench.hardware.franka import FrankaRobot, Payload
+
+        robot = FrankaRobot(
+            args.robot_ip,
+            kind=cfg.robot.kind,
+            realtime=args.realtime,
+            ext_wrench_sign=args.ext_wrench_sign,
+            report_external_force=not args.no_external_force,
+            load=Payload.from_scope(ctrl.model.scope),
+            dt=cfg.robot.dt,
+        )
+        desc = robot.device
+    sup = SafetySupervisor(
+        ctrl.model.limits,
+        cfg.robot.dt,
+        SupervisorConfig.from_config(
+            cfg,
+            cycle_budget=args.cycle_budget_us * 1e-6,
+            max_consecutive_misses=args.max_misses,
+            **({} if args.max_rcm_error is None else {"max_rcm_error": args.max_rcm_error}),
+        ),
+    )
+    ages = SourceAges(ft=args.ft_max_age, tactile=args.tactile_max_age, instruments=args.camera_max_age)
+    return ControlLoop(robot, ctrl, sup, sources, ages=ages), desc
