@@ -1,6 +1,6 @@
 """Benchmark: the 1 kHz control loop in its own process against franky-sim, idle and loaded.
 
-The loop runs as ``lapwrench run`` runs it (:mod:`lapwrench.hardware.rt_process`): a spawned
+The loop runs as ``lapwrench run`` runs it (:mod:`lapwrench.hardware.rt`): a spawned
 process with the robot (pylibfranka → franky-sim on 127.0.0.1), the full controller and the
 supervisor, draining the handle F/T socket each cycle (a simulated HEX box streaming 1 kHz UDP from
 a process of its own, as a real box is a device of its own). This process feeds the tactile grip
@@ -82,7 +82,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
     from lapwrench.drivers.tactile import TactileFrame
     from lapwrench.hardware.cli import FakeFTProcess
     from lapwrench.hardware.frankysim import FrankySimServer
-    from lapwrench.hardware.rt_process import FtSpec, RtOptions, RtProcess, RtSpec, franka_factory
+    from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec, franka_factory
     from lapwrench.hardware.supervisor import SupervisorConfig
     from lapwrench.virtual import DEFAULT_Q0
 

@@ -332,7 +332,7 @@ class ControlLoop:
         Sensor threads may share the interpreter with this loop, and pylibfranka's ``readOnce``
         keeps the GIL while it blocks, so the loop yields the GIL before each ``read`` and shortens
         the switch interval (100 µs by default). The hardware path runs this loop in a process of
-        its own (:mod:`lapwrench.hardware.rt_process`).
+        its own (:mod:`lapwrench.hardware.rt`).
 
         Raises:
             RobotError: the robot failed (the loop disconnects before re-raising).

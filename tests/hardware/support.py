@@ -121,12 +121,12 @@ def build_loop(
 
 
 
-# -- the process path (lapwrench.hardware.rt_process) -------------------------------------------
+# -- the process path (lapwrench.hardware.rt) -------------------------------------------
 def rt_spec(cfg: Config, **kw: Any) -> Any:
     """An RtSpec on the simulated robot (paced to the wall clock), real-time settings off (tests)."""
     import functools
 
-    from lapwrench.hardware.rt_process import RtOptions, RtSpec, sim_factory
+    from lapwrench.hardware.rt import RtOptions, RtSpec, sim_factory
 
     kw.setdefault("robot_factory", functools.partial(sim_factory, realtime=True))
     kw.setdefault("supervisor", relaxed_supervisor_config())
@@ -140,7 +140,7 @@ def rt_spec(cfg: Config, **kw: Any) -> Any:
 
 def rt_process(spec: Any, **kw: Any) -> Any:
     """An RtProcess with a child heartbeat timeout for a loaded CI machine (5 s unless given)."""
-    from lapwrench.hardware.rt_process import RtProcess
+    from lapwrench.hardware.rt import RtProcess
 
     kw.setdefault("child_timeout", 5.0)
     return RtProcess(spec, **kw)
@@ -149,7 +149,7 @@ def rt_process(spec: Any, **kw: Any) -> Any:
 def feeder_main(bus_name: str, bus_rows: tuple[int, int], period: float = 0.001) -> None:
     """A feeder in a process of its own (so a test can kill or stop it): beats the parent heartbeat
     and publishes a firm grip into the tactile slot, until killed."""
-    from lapwrench.hardware.rt_process import BEAT_PARENT, bus_layout
+    from lapwrench.hardware.rt import BEAT_PARENT, bus_layout
     from lapwrench.hardware.shm import Bus
 
     bus = Bus.attach(bus_name, bus_layout(*bus_rows))

@@ -14,7 +14,7 @@ import pytest
 from hardware.support import MemoryLogger, failing_detector, fixed_detector, rt_process, rt_spec
 
 from lapwrench.hardware.detector_process import DetectorProcess
-from lapwrench.hardware.rt_process import RtProcessError, bus_layout
+from lapwrench.hardware.rt import RtProcessError, bus_layout
 from lapwrench.hardware.shm import Bus
 
 SIZE = (64, 48)

@@ -1,7 +1,7 @@
 """End to end through the real libfranka protocol: pylibfranka ↔ franky-sim on 127.0.0.1, through the
 process path of ``lapwrench run``, beside a CPU-heavy process.
 
-The full controller runs in its own process (:mod:`lapwrench.hardware.rt_process`) for more than
+The full controller runs in its own process (:mod:`lapwrench.hardware.rt`) for more than
 5 s of robot time with a simulated handle wrench arriving through the real UDP F/T driver (a
 loopback HEX box), drained by the loop's process each cycle; the grip comes through shared memory
 from this process; every command goes through the supervisor and pylibfranka's ``writeOnce``, and
@@ -40,7 +40,7 @@ from hardware.support import MemoryLogger, QdProbe, rt_process, rt_spec
 from lapwrench.drivers.buffer import LatestValue
 from lapwrench.drivers.fakes import FakeFTDevice
 from lapwrench.drivers.tactile import TactileFrame
-from lapwrench.hardware.rt_process import CTL_CYCLES, FtSpec, RtProcess, franka_factory
+from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 

@@ -27,7 +27,7 @@ from hardware.support import MemoryLogger, feeder_main, rt_process, rt_spec
 from lapwrench.drivers.buffer import LatestValue
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.log import read_log
-from lapwrench.hardware.rt_process import RtOptions, RtProcess, RtProcessError, apply_realtime
+from lapwrench.hardware.rt import RtOptions, RtProcess, RtProcessError, apply_realtime
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 
@@ -206,7 +206,7 @@ def test_a_robot_that_fails_to_connect_is_a_robot_error(panda_cfg: Any) -> None:
 
     from hardware.support import FRANKYSIM_MISSING
 
-    from lapwrench.hardware.rt_process import franka_factory
+    from lapwrench.hardware.rt import franka_factory
 
     factory = functools.partial(franka_factory, robot_ip="127.0.0.1", kind="panda", realtime="ignore")
     spec = rt_spec(panda_cfg, robot_factory=factory)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lapwrench.hardware.log import CycleRecord
-from lapwrench.hardware.rt_process import MAX_POINTS, CycleCodec, ShmInput, ShmLogSink, bus_layout
+from lapwrench.hardware.rt import MAX_POINTS, CycleCodec, ShmInput, ShmLogSink, bus_layout
 from lapwrench.hardware.shm import Bus, Layout, ShmError, pack_event, unpack_event
 
 

@@ -3,11 +3,11 @@
 The parent copies each new camera frame into a frame slot (a :class:`~lapwrench.hardware.shm.SeqlockSlot`
 of ``height x width x 3`` uint8 in a block of its own, stamped with the frame's capture time); the
 detector process copies the newest frame out, runs the detector and writes the image points (at
-most :data:`~lapwrench.hardware.rt_process.MAX_POINTS`, in the detector's order, finite only) into
+most :data:`~lapwrench.hardware.rt.MAX_POINTS`, in the detector's order, finite only) into
 the real-time bus's ``instruments`` slot, stamped with the *frame's* time so the control loop's
 age check covers capture + detection latency. It beats its heartbeat on the bus each iteration;
 the real-time process watches that heartbeat and the detector's pid (see
-:mod:`lapwrench.hardware.rt_process`).
+:mod:`lapwrench.hardware.rt`).
 
 The detector is built in the child from a picklable ``factory()`` (a module-level function or a
 ``functools.partial``), e.g. :func:`shipped_factory` or :func:`spec_factory`.
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from lapwrench.drivers.buffer import LatestValue
-from lapwrench.hardware.rt_process import (
+from lapwrench.hardware.rt import (
     BEAT_DETECTOR,
     CTL_DET_ERRORS,
     CTL_DET_FRAMES,
@@ -133,7 +133,7 @@ class DetectorProcess:
     Args:
         factory: Builds the detector in the child (picklable).
         bus_name: The real-time bus (:attr:`RtProcess.bus_name` or a :class:`Bus` of
-            :func:`~lapwrench.hardware.rt_process.bus_layout`), where the points go.
+            :func:`~lapwrench.hardware.rt.bus_layout`), where the points go.
         size: Frame size ``(width, height)``.
         bus_rows: The bus layout's ``(log_rows, event_rows)``.
         poll_s: The child's sleep when no new frame is there.

@@ -6,7 +6,7 @@ the same shape). The loop only *peeks*: each cycle it takes the newest sample of
 is at most its ``max_age`` old (:class:`SourceAges`), otherwise ``None`` — and a ``None`` input
 switches that source's wrench off in the controller. Nothing in the loop waits on a sensor, a
 camera, a detector or the log file (:class:`~lapwrench.hardware.log.RunLogger` writes from its
-own thread, or from the parent process: :mod:`lapwrench.hardware.rt_process`).
+own thread, or from the parent process: :mod:`lapwrench.hardware.rt`).
 
 :class:`ControlLoop` here is the one loop with its hardware wiring: the buffers become
 :class:`~lapwrench.sources.BufferSource` s, the clock is ``time.monotonic()`` (the clock the

@@ -49,17 +49,73 @@ Real-time settings (:class:`RtOptions`): SCHED_FIFO and CPU affinity when permit
 when not (like panda-py), and the garbage collector frozen in the loop.
 """
 
-from lapwrench.hardware.rt.bus import MAX_POINTS, bus_layout
-from lapwrench.hardware.rt.codec import CycleCodec, ShmLogSink
-from lapwrench.hardware.rt.factories import franka_factory, sim_factory
-from lapwrench.hardware.rt.inputs import ShmInput
-from lapwrench.hardware.rt.options import RtOptions, apply_realtime
-from lapwrench.hardware.rt.parent import RtProcess
-from lapwrench.hardware.rt.peers import PeerSpec, PeerWatch
-from lapwrench.hardware.rt.spec import FtSpec, RtProcessError, RtResult, RtSpec
+from lapwrench.hardware.rt.bus import (
+    BEAT_CHILD,
+    BEAT_DETECTOR,
+    BEAT_PARENT,
+    CTL_CYCLES,
+    CTL_DET_ERRORS,
+    CTL_DET_FRAMES,
+    CTL_DET_STOP,
+    CTL_PHASE,
+    CTL_STOP,
+    EVENT_BYTES,
+    MAX_POINTS,
+    PHASE_DONE,
+    PHASE_READY,
+    PHASE_RUNNING,
+    PHASE_STARTING,
+    TACTILE_N,
+    bus_layout,
+)
+from lapwrench.hardware.rt.codec import (
+    INTERN,
+    CycleCodec,
+    ShmLogSink,
+)
+from lapwrench.hardware.rt.factories import (
+    franka_factory,
+    sim_factory,
+)
+from lapwrench.hardware.rt.inputs import (
+    ShmInput,
+)
+from lapwrench.hardware.rt.options import (
+    RtOptions,
+    apply_realtime,
+)
+from lapwrench.hardware.rt.parent import (
+    RtProcess,
+)
+from lapwrench.hardware.rt.peers import (
+    PeerSpec,
+    PeerWatch,
+)
+from lapwrench.hardware.rt.spec import (
+    FtSpec,
+    RtProcessError,
+    RtResult,
+    RtSpec,
+)
 
 __all__ = [
+    "BEAT_CHILD",
+    "BEAT_DETECTOR",
+    "BEAT_PARENT",
+    "CTL_CYCLES",
+    "CTL_DET_ERRORS",
+    "CTL_DET_FRAMES",
+    "CTL_DET_STOP",
+    "CTL_PHASE",
+    "CTL_STOP",
+    "EVENT_BYTES",
+    "INTERN",
     "MAX_POINTS",
+    "PHASE_DONE",
+    "PHASE_READY",
+    "PHASE_RUNNING",
+    "PHASE_STARTING",
+    "TACTILE_N",
     "CycleCodec",
     "FtSpec",
     "PeerSpec",
