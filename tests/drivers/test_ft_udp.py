@@ -410,3 +410,33 @@ def test_polled_start_without_device_times_out_clearly() -> None:
         assert not s.polled and s.drain() == 0  # stopped: draining a closed source is a no-op
     finally:
         sock.close()
+
+
+def test_a_rejected_record_far_ahead_does_not_stall_the_stream(peer: RawPeer) -> None:
+    """Issue 11: one record with sequence + 900 (a status error, or corrupt) used to make the driver
+    drop the next 900 good records; now it costs nothing (status error) or one packet (good status)."""
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        peer.send(pack_record(2, 2, 0, [10000, 0, 0, 0, 0, 0]))
+        peer.send(pack_record(902, 902, 0x40, [0] * 6))  # status error, far ahead
+        peer.send(pack_record(950, 950, 0, [0] * 6))  # clean status but far ahead and alone: unconfirmed
+        peer.send(pack_record(3, 3, 0, [30000, 0, 0, 0, 0, 0]))  # the good stream goes on
+        assert settle(s, 4) == 4
+        np.testing.assert_allclose(s.latest().value.force, [3.0, 0.0, 0.0])
+        assert s.status().drops == 0
+    finally:
+        s.stop()
+
+
+def test_a_wrench_beyond_any_sensor_range_is_a_corrupt_record(peer: RawPeer) -> None:
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        peer.send(pack_record(2, 2, 0, [2_000_000_000, 0, 0, 0, 0, 0]))  # 200 kN at the HEX's scale
+        peer.send(pack_record(3, 3, 0, [50000, 0, 0, 0, 0, 0]))
+        assert settle(s, 2) == 2
+        np.testing.assert_allclose(s.latest().value.force, [5.0, 0.0, 0.0])
+        assert s.status().malformed >= 1
+    finally:
+        s.stop()

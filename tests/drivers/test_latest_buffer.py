@@ -6,6 +6,7 @@ import math
 import threading
 import time
 
+import numpy as np
 import pytest
 
 from lapwrench.drivers.buffer import LatestValue, RateMonitor, Sample
@@ -140,9 +141,31 @@ def test_rate_monitor_wraparound_and_restart() -> None:
     assert rm.stats().drops == 0
     rm2 = RateMonitor(restart_gap=100)
     assert rm2.check_seq(50_000)
-    assert rm2.check_seq(1)  # device restarted its counter
-    assert not rm2.check_seq(1)
-    assert rm2.stats().out_of_order == 1
+    assert not rm2.check_seq(1)  # device restarted its counter? not until the next packet confirms it
+    assert rm2.check_seq(2)  # confirmed: one resync, no drops
+    assert not rm2.check_seq(2)
+    st = rm2.stats()
+    assert st.resyncs == 1 and st.drops == 0 and st.out_of_order == 2
+
+
+def test_one_far_sequence_jump_costs_one_packet_and_no_drop_count() -> None:
+    """A corrupt packet 900 ahead must not make the monitor discard the next 900 good ones (issue 11)."""
+    rm = RateMonitor()
+    for s in range(100, 110):
+        assert rm.check_seq(s)
+    assert not rm.check_seq(110 + 900)  # the outlier: discarded, not committed
+    assert all(rm.check_seq(s) for s in range(110, 200))  # the good stream goes on
+    st = rm.stats()
+    assert st.drops == 0 and st.resyncs == 0 and st.out_of_order == 1
+
+
+def test_random_sequence_numbers_do_not_inflate_the_drop_count() -> None:
+    rm = RateMonitor()
+    rng = np.random.default_rng(0)
+    rm.check_seq(5)
+    for s in rng.integers(0, 2**32, 1000):
+        rm.check_seq(int(s))
+    assert rm.stats().drops < 1000 * 100  # at most resync_gap per accepted packet, never ~1e11
 
 
 def test_rate_monitor_validates_arguments() -> None:

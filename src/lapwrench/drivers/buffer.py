@@ -145,6 +145,7 @@ class RateStats:
         out_of_order: Arrivals whose sequence number did not advance (duplicates, reordering).
         late: Inter-arrival gaps longer than ``late_factor`` x the expected period.
         last_time: Monotonic time of the last arrival (``None`` if none).
+        resyncs: Far sequence jumps confirmed by the next packet (outages, device restarts).
     """
 
     rate_hz: float
@@ -153,6 +154,7 @@ class RateStats:
     out_of_order: int
     late: int
     last_time: float | None
+    resyncs: int = 0
 
 
 class RateMonitor:
@@ -164,8 +166,10 @@ class RateMonitor:
         late_factor: An arrival is *late* when the gap since the previous one exceeds
             ``late_factor / expected_rate_hz``.
         seq_bits: Width of the device sequence counter (wrap-around handling).
-        restart_gap: A backwards jump larger than this many counts is treated as a device stream
-            restart (the counter was reset) rather than as an out-of-order packet.
+        restart_gap: A backwards jump larger than this many counts may be a device stream restart
+            (the counter was reset) rather than an out-of-order packet (see :meth:`check_seq`).
+        resync_gap: A forward jump larger than this many counts may be an outage or a corrupt
+            packet (see :meth:`check_seq`).
         max_events: Cap on timestamps kept in the window (bounds memory at very high rates).
 
     All methods are thread-safe; each holds an internal lock for a few microseconds.
@@ -179,6 +183,7 @@ class RateMonitor:
         seq_bits: int = 32,
         restart_gap: int = 1000,
         max_events: int = 20000,
+        resync_gap: int = 100,
     ) -> None:
         if window_s <= 0:
             raise ValueError("window_s must be > 0")
@@ -189,6 +194,9 @@ class RateMonitor:
         self.late_factor = float(late_factor)
         self._mod = 1 << seq_bits
         self._restart_gap = restart_gap
+        self._resync_gap = resync_gap
+        self._pending_seq: int | None = None
+        self._resyncs = 0
         self._times: deque[float] = deque(maxlen=max_events)
         self._lock = threading.Lock()
         self._count = 0
@@ -199,29 +207,40 @@ class RateMonitor:
         self._last_seq: int | None = None
 
     def check_seq(self, seq: int) -> bool:
-        """Account for device sequence number ``seq``; return False if the packet is stale.
+        """Account for device sequence number ``seq``; return False if the packet is to be discarded.
 
-        A forward gap of ``k`` counts adds ``k - 1`` drops. A duplicate or small backwards step
-        counts as out-of-order and returns False (the caller should discard the packet). A large
-        backwards step (> ``restart_gap``) is accepted as a device stream restart.
+        A forward step of ``k <= resync_gap`` counts adds ``k - 1`` drops. A duplicate or a small
+        backwards step (``<= restart_gap``) counts as out-of-order. A *far* jump (forward beyond
+        ``resync_gap``, or backward beyond ``restart_gap``) is either a stream resync (an outage, a
+        device restart) or a corrupt packet; it is accepted only when the next packet continues from
+        it (it then counts one resync, not the packets in between as drops). Until then it is
+        discarded and the stream goes on from the old number, so one bad packet costs one packet.
         """
         with self._lock:
             last = self._last_seq
             if last is None:
                 self._last_seq = seq
                 return True
-            diff = (seq - last) % self._mod
-            if diff >= self._mod // 2:  # negative in two's complement
-                diff -= self._mod
-            if diff >= 1:
+            diff = self._signed(seq - last)
+            if 1 <= diff <= self._resync_gap:
                 self._drops += diff - 1
-                self._last_seq = seq
+                self._last_seq, self._pending_seq = seq, None
                 return True
-            if -diff > self._restart_gap:
-                self._last_seq = seq
+            if diff <= 0 and -diff <= self._restart_gap:
+                self._out_of_order += 1
+                return False
+            pending = self._pending_seq
+            if pending is not None and 1 <= self._signed(seq - pending) <= self._resync_gap:
+                self._last_seq, self._pending_seq = seq, None
+                self._resyncs += 1
                 return True
+            self._pending_seq = seq
             self._out_of_order += 1
             return False
+
+    def _signed(self, d: int) -> int:
+        d %= self._mod
+        return d - self._mod if d >= self._mod // 2 else d
 
     def tick(self, now: float | None = None) -> None:
         """Record one accepted arrival at ``now`` (default ``time.monotonic()``)."""
@@ -276,12 +295,13 @@ class RateMonitor:
                 out_of_order=self._out_of_order,
                 late=self._late,
                 last_time=self._last_time,
+                resyncs=self._resyncs,
             )
 
     def reset(self) -> None:
         """Clear the window, the counters and the remembered sequence number."""
         with self._lock:
             self._times.clear()
-            self._count = self._drops = self._out_of_order = self._late = 0
+            self._count = self._drops = self._out_of_order = self._late = self._resyncs = 0
             self._last_time = None
-            self._last_seq = None
+            self._last_seq = self._pending_seq = None

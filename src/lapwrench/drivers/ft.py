@@ -212,6 +212,10 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
             :class:`StatusError` (default: any non-zero status; the OnRobot ROS node likewise
             stops on a non-zero status).
         send_stop_on_close: Send the stop-streaming command when stopping.
+        max_force, max_torque: A record beyond these (N, N m; far above the rated range of the
+            supported sensors, e.g. 200 N for a HEX-E) is corrupt and rejected. The RDT record has
+            no checksum, so corruption inside the range cannot be told from data; the controller's
+            own range check (``interaction.force_range``) applies on top.
     """
 
     kind = "F/T"
@@ -230,6 +234,8 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         recv_timeout: float = 0.05,
         status_error_mask: int = 0xFFFFFFFF,
         send_stop_on_close: bool = True,
+        max_force: float = 2000.0,
+        max_torque: float = 100.0,
     ) -> None:
         if counts_per_force <= 0 or counts_per_torque <= 0:
             raise ValueError("counts_per_force and counts_per_torque must be > 0")
@@ -243,6 +249,8 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         self.recv_timeout = recv_timeout
         self.status_error_mask = status_error_mask
         self.send_stop_on_close = send_stop_on_close
+        self.max_force = float(max_force)
+        self.max_torque = float(max_torque)
         self._sock: socket.socket | None = None
         self._scale = np.array([1.0 / self.counts_per_force] * 3 + [1.0 / self.counts_per_torque] * 3)
         self._bias = np.zeros(6)
@@ -349,12 +357,16 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
             PacketError: malformed datagram or (:class:`StatusError`) a device status error.
         """
         rec = unpack_record(data)
-        if not self.rate.check_seq(rec.sequence):
-            return None  # duplicate / out-of-order, counted by the rate monitor
+        # the checks of the record itself come first: a rejected record never moves the sequence
         if rec.status & self.status_error_mask:
             self.last_status = rec.status
             raise StatusError(f"device status 0x{rec.status:08x}")
         raw = np.asarray(rec.counts, dtype=np.float64) * self._scale
+        f, m = float(np.linalg.norm(raw[:3])), float(np.linalg.norm(raw[3:]))
+        if not (f <= self.max_force and m <= self.max_torque):
+            raise PacketError(f"wrench beyond any sensor's range (|F| {f:.0f} N, |M| {m:.1f} N m): corrupt record")
+        if not self.rate.check_seq(rec.sequence):
+            return None  # duplicate / out-of-order / an unconfirmed far jump, counted by the rate monitor
         tare = self._tare
         if tare is not None and not tare.done.is_set():
             tare.samples.append(raw)
