@@ -108,11 +108,19 @@ def test_parser_handles_split_reads_and_garbage(checksum: ChecksumType) -> None:
     for i in range(0, len(stream), 7):  # arbitrary read boundaries
         got, _errs = p.feed(stream[i : i + 7])
         out += got
-    assert len(out) == 5
-    for k, v in enumerate(out):
-        np.testing.assert_array_equal(v, pattern(k))
+    if checksum is ChecksumType.NONE:
+        # without a checksum a frame counts once the next header follows it: frame 1 is followed by
+        # garbage (unconfirmed, rejected) and frame 4 waits for a successor
+        assert len(out) == 3
+        for k, v in zip((0, 2, 3), out, strict=True):
+            np.testing.assert_array_equal(v, pattern(k))
+        assert p.malformed == 1
+    else:
+        assert len(out) == 5
+        for k, v in enumerate(out):
+            np.testing.assert_array_equal(v, pattern(k))
+        assert p.malformed == 0
     assert p.garbage_bytes > 0
-    assert p.malformed == 0
 
 
 @pytest.mark.parametrize("checksum", [ChecksumType.SUM8, ChecksumType.XOR8, ChecksumType.CRC16_MODBUS])
@@ -135,7 +143,7 @@ def test_parser_without_checksum_detects_length_mismatch() -> None:
     bad = bytearray(fmt.encode(pattern(0)))
     bad[2] = 10
     p = TactileFrameParser(fmt)
-    out, errs = p.feed(bytes(bad) + fmt.encode(pattern(1)))
+    out, errs = p.feed(bytes(bad) + fmt.encode(pattern(1)) + fmt.header)  # the next frame's header confirms
     assert len(out) == 1 and len(errs) == 1
     np.testing.assert_array_equal(out[0], pattern(1))
 
@@ -238,3 +246,24 @@ def test_missing_serial_port_names_device(tmp_path) -> None:
     with pytest.raises(DeviceOpenError, match="ttyNOPE"):
         src.start()
     assert not src.running
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_random_bytes_never_make_a_grip_without_a_checksum(seed: int) -> None:
+    """Issue 11: line noise and random bytes became grip frames with the default (no checksum) format."""
+    fmt = TactileFrameFormat()
+    rng = np.random.default_rng(seed)
+    noise = rng.integers(0, 256, 2_000_000, dtype=np.uint8).tobytes()  # ~30 chance headers in 2 MB
+    p = TactileFrameParser(fmt)
+    out: list = []
+    for i in range(0, len(noise), 4096):
+        out += p.feed(noise[i : i + 4096])[0]
+    assert out == [] and p.malformed > 0  # every chance header was a candidate, none confirmed
+
+
+def test_a_frame_cut_short_without_a_checksum_is_rejected() -> None:
+    fmt = TactileFrameFormat()
+    frames = [fmt.encode(pattern(k)) for k in range(3)]
+    p = TactileFrameParser(fmt)
+    out, _ = p.feed(frames[0] + frames[1][:30] + frames[2] + fmt.header)
+    assert [int(v[0]) for v in out] == [int(pattern(0)[0]), int(pattern(2)[0])]

@@ -16,8 +16,10 @@ layout is configurable with :class:`TactileFrameFormat`::
 Resynchronisation: :class:`TactileFrameParser` scans for the header, skips anything before it
 (counted as garbage), and on a rejected candidate frame drops only its first byte and scans again,
 so a real header inside a corrupted or truncated frame is found. A frame cut short on the wire is
-only detectable with a checksum: without one, a short frame followed by a good frame yields one
-wrong frame and one lost frame. Use a checksum for the real device if it offers one.
+only detectable with a checksum. Without one, a frame counts only once the next frame's header
+follows it exactly where it should (one frame of latency): random bytes or line noise then practically
+never pass as a frame (a header at two exact places), and a frame cut short is rejected. A grip must
+never come from corruption. Use a checksum for the real device if it offers one.
 
 :class:`SerialTactileArray` runs the parser in a reader thread and publishes
 :class:`TactileFrame` values (read-only ``values`` array) into a latest-value buffer. The port may
@@ -220,10 +222,13 @@ class TactileFrameParser:
             if idx > 0:
                 self.garbage_bytes += idx
                 del buf[:idx]
-            if len(buf) < size:
+            confirm = len(header) if self.fmt.checksum is ChecksumType.NONE else 0
+            if len(buf) < size + confirm:
                 break
             try:
                 values = self.fmt.decode(buf[:size])
+                if confirm and buf[size : size + confirm] != header:
+                    raise PacketError("frame not followed by the next header: unconfirmed (the format has no checksum)")
             except PacketError as exc:
                 self.malformed += 1
                 errors.append(exc)
