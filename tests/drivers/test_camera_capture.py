@@ -156,3 +156,30 @@ def test_unreachable_stream_url_fails_fast_naming_url() -> None:
     with pytest.raises(DeviceOpenError, match=f"camera stream '{url}'"):
         Camera(url, open_timeout_ms=1000).start()
     assert time.monotonic() - t0 < 5.0
+
+
+def test_a_truncated_video_is_counted_and_reported(tmp_path: Path) -> None:
+    """Issue 11: a truncated file used to just end early, with nothing counted or reported."""
+    path = tmp_path / "long.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), FPS, (W, H))
+    for k in range(40):
+        img = np.zeros((H, W, 3), np.uint8)
+        img[:, :, 2], img[:, :, 1] = 220, k * 5
+        writer.write(img)
+    writer.release()
+    data = path.read_bytes()
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(data[: int(0.6 * len(data))])  # the container still declares 40 frames
+    with Camera(cut, pace=False) as cam:
+        assert wait_until(lambda: cam.status().finished)
+        st = cam.status()
+    assert 0 < st.samples < 40
+    assert st.malformed == 1 and st.drops == 40 - st.samples
+    assert st.last_error is not None and "of its 40 frames" in st.last_error
+
+
+def test_a_complete_video_reports_nothing(video: Path) -> None:
+    with Camera(video, pace=False) as cam:
+        assert wait_until(lambda: cam.status().finished)
+        st = cam.status()
+    assert st.samples == N_FRAMES and st.malformed == 0 and st.drops == 0

@@ -16,7 +16,9 @@ Checks, in order, all in ``start()`` before any thread runs:
 Later frames failing validation raise :class:`~lapwrench.drivers.base.PacketError` in the grabber
 (counted in ``status().malformed``, frame dropped); read failures of a device or stream are counted
 as I/O errors and retried; the end of a file ends the thread (``status().finished``) unless
-``loop=True``.
+``loop=True``. A file that ends before the frame count its container declares (truncated or
+corrupt) is counted: one malformed frame with the numbers in ``last_error``, the missing frames as
+drops.
 
 Frames are ``uint8`` arrays of shape (H, W, 3) in **RGB** order (OpenCV delivers BGR; we convert),
 marked read-only. The sample timestamp is the host ``time.monotonic()`` right after the grab.
@@ -153,6 +155,7 @@ class Camera(StreamingSource[CameraFrame]):
         self.open_timeout_ms = open_timeout_ms
         self._cap: cv2.VideoCapture | None = None
         self._index = 0
+        self._pass_start = 0
         self._period = 0.0
         self._next_due = 0.0
 
@@ -210,6 +213,7 @@ class Camera(StreamingSource[CameraFrame]):
         if self.pace and self.rate.expected_rate_hz is None:
             self.rate.expected_rate_hz = rate
         self._index = 0
+        self._pass_start = 0
         now = time.monotonic()
         self._publish_frame(rgb, now)
         self._next_due = now + self._period
@@ -233,6 +237,17 @@ class Camera(StreamingSource[CameraFrame]):
             if not cap.isOpened():
                 raise OSError(f"{self.device}: could not reopen to loop")
 
+    def _check_file_end(self, cap: cv2.VideoCapture) -> None:
+        """At the end of a file: fewer frames than its container declares is a truncated or corrupt
+        file, counted (malformed, and the missing frames as drops) and reported in ``last_error``."""
+        declared = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        got = self._index - self._pass_start
+        if declared > 0 and got < declared:
+            self.rate.add_drops(declared - got)
+            self._record_malformed(
+                PacketError(f"{self.device}: the file ended after {got} of its {declared} frames (truncated, corrupt)")
+            )
+
     def _read_once(self) -> None:
         cap = self._cap
         if cap is None:
@@ -246,9 +261,11 @@ class Camera(StreamingSource[CameraFrame]):
         now = time.monotonic()
         if not ok:
             if self.kind == "file":
+                self._check_file_end(cap)
                 if not self.loop:
                     raise EndOfStream
                 self._rewind(cap)
+                self._pass_start = self._index
                 return
             raise OSError(f"{self.device}: frame grab failed")
         try:
