@@ -249,3 +249,16 @@ def test_any_frame_size_when_unconfigured(make_layout_model):
     det = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True),
                            DetectorConfig(frame_size=None), input_size=320)
     assert det.detect(np.zeros((100, 200, 3), np.uint8)) is not None
+
+
+def test_a_non_finite_box_is_never_a_detection(make_layout_model) -> None:
+    """Issue 11: a YOLOv8 output with a NaN box gave a detection at (NaN, NaN)."""
+    det = OnnxYoloDetector(make_layout_model("yolov8", (640, 640)))
+    out = np.zeros((1, 4 + 3, 3), dtype=np.float32)
+    out[0, :4, 0] = [np.nan, 100.0, 20.0, 20.0]  # x, y, w, h
+    out[0, :4, 1] = [200.0, 200.0, np.inf, 20.0]
+    out[0, :4, 2] = [300.0, 300.0, 20.0, 20.0]
+    out[0, 4, :] = 0.9  # class 0, well above the threshold
+    boxes, _scores, _ = det.decode([out])
+    assert len(boxes) == 1 and np.isfinite(boxes).all()
+    np.testing.assert_allclose(boxes[0], [290.0, 290.0, 310.0, 310.0])

@@ -421,7 +421,8 @@ class OnnxYoloDetector:
                 cls = cls_scores.argmax(axis=1)
                 scores = cls_scores[np.arange(len(cls)), cls]
             boxes = xywh_to_xyxy(pred[:, :4])
-        keep = scores > thr
+        # NaN compares False: a non-finite score is dropped here; a non-finite box with it
+        keep = (scores > thr) & np.isfinite(boxes).all(axis=1)
         if self.config.classes is not None:
             keep &= np.isin(cls, np.fromiter(self.config.classes, dtype=np.int64))
         boxes, scores, cls = boxes[keep], scores[keep], cls[keep]
