@@ -116,6 +116,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except DemoError as exc:
         print(f"lapwrench: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print("lapwrench: demo interrupted; no report was written", file=sys.stderr)
+        return 130
     for name, res in results.items():
         print(f"{name}: " + ", ".join(f"{r.label}: RCM max {r.metrics['rcm_error_max_mm']:.2f} mm" for r in res.runs))
     print(f"report: {Path(args.out) / 'report.md'}")

@@ -14,6 +14,7 @@ import multiprocessing as mp
 import os
 import platform
 import shutil
+import signal
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -121,6 +122,7 @@ PRINTED_DAMPING = "needle-search, printed damping"
 def _init_worker(queue: Any) -> None:
     global _PROGRESS
     _PROGRESS = queue
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
 
 
 _PROGRESS: Any = None
@@ -177,26 +179,42 @@ def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, Scenario
     # the workers then load numba's cache instead of each compiling the tick (a minute on a fresh clone)
     ctx = mp.get_context("spawn")  # no fork of a process holding MuJoCo/EGL and numba state
     queue = ctx.Queue()
-    with ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,)) as pool:
-        order = sorted(names, key=lambda n: -SIM_SECONDS.get(n, 15.0))
-        names_of = {pool.submit(_task, n, plan): n for n in order}
-        pending = set(names_of)
-        bar.set_postfix_str(f"{plan.workers} workers")
-        while pending:
-            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
-            _drain(queue, bar)
-            for f in done:
-                try:
-                    name, res, err = f.result()
-                except Exception as exc:  # a worker that crashed or raised something unexpected
-                    name, res = names_of[f], ""
-                    err = f"scenario '{name}' failed in its worker process: {type(exc).__name__}: {exc}"
-                if err:
-                    for p in pending:
-                        p.cancel()
-                    raise DemoError(err)
-                out[name] = res
+    pool = ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,))
+    try:
+        return _collect(pool, plan, names, queue, bar, out)
+    except BaseException:  # Ctrl-C or a failed scenario: stop the other workers now, not at their end
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    finally:
+        pool.shutdown(wait=True)
+
+
+def _collect(
+    pool: ProcessPoolExecutor, plan: DemoPlan, names: list[str], queue: Any, bar: Any,
+    out: dict[str, ScenarioResult | str],
+) -> dict[str, ScenarioResult | str]:
+    """Submit the tasks longest first and gather their results, feeding the progress bar."""
+    order = sorted(names, key=lambda n: -SIM_SECONDS.get(n, 15.0))
+    names_of = {pool.submit(_task, n, plan): n for n in order}
+    pending = set(names_of)
+    bar.set_postfix_str(f"{plan.workers} workers")
+    while pending:
+        done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
         _drain(queue, bar)
+        for f in done:
+            try:
+                name, res, err = f.result()
+            except Exception as exc:  # a worker that crashed or raised something unexpected
+                name, res = names_of[f], ""
+                err = f"scenario '{name}' failed in its worker process: {type(exc).__name__}: {exc}"
+            if err:
+                for p in pending:
+                    p.cancel()
+                raise DemoError(err)
+            out[name] = res
+    _drain(queue, bar)
     return out
 
 
