@@ -31,6 +31,7 @@ from lapwrench.tick_core import (
     fill_saturation_inputs,
     geometry_stage,
     motion_stage,
+    saturation_stage,
     tick_stage,
 )
 from lapwrench.wrenches.base import DampingSource, TickContext, WrenchSource
@@ -53,8 +54,9 @@ class StageResult(NamedTuple):
     contacts: int
     non_finite: bool
     admitted: bool  # the desired acceleration met every limit and ``ref`` is the next reference
-    ref: tuple[Vec, Vec, Vec] | None
+    ref: tuple[Vec, Vec, Vec] | None  # the next reference, when admitted or saturated in the compiled step
     clamped: bool
+    at_bound: np.ndarray  # the limit rows (joint box, then envelope) at a bound when saturated
 
 
 class _Extra(NamedTuple):
@@ -72,6 +74,7 @@ def _f64(x: object) -> Vec:
 _ZERO3 = np.zeros(3)
 _NO_TACTILE = np.zeros(64)
 _NO_POINTS = np.zeros((0, 2))
+_NO_ROWS = np.zeros(0, dtype=bool)
 _NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), {})
 
 
@@ -151,6 +154,9 @@ class CompiledTick:
             m_args = self._motion_args(kin, Minv, geo, none, _NO_EXTRA, zero, False, R_E0)
             self._motion_stage = bind(motion_stage, *m_args)
             self._motion_stage(*m_args)
+            s_args = (self.sat, Minv, terms.q, terms.dq, self.params)
+            self._saturation_stage = bind(saturation_stage, *s_args)
+            self._saturation_stage(*s_args)
         finally:
             self.rcm.state, self.feedback.offsets = live_rcm, live_offsets
 
@@ -165,11 +171,13 @@ class CompiledTick:
             return self._run_with_extras(t, terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0,
                                          may_admit)
         args = self._tick_args(terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0, may_admit)
-        vec3, W, ref, tau, delta, contacts, has_res, non_finite, admitted, clamped = self._tick_stage(*args)
+        vec3, W, ref, at, tau, delta, contacts, has_res, non_finite, admitted, saturated, clamped = self._tick_stage(
+            *args
+        )
         wrenches = {"rcm": W[0], "interaction": W[1], "tracking": W[2], "viscous": W[3]}
         return StageResult(
             vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] if has_res else None, wrenches, W[4], tau, delta, contacts,
-            non_finite, admitted, (ref[0], ref[1], ref[2]) if admitted else None, clamped,
+            non_finite, admitted, (ref[0], ref[1], ref[2]) if admitted or saturated else None, clamped, at,
         )
 
     def _run_with_extras(
@@ -186,13 +194,16 @@ class CompiledTick:
         o = self._motion_stage(*self._motion_args(kin, Minv, geo, inputs, extra, ddq_ref, stopping, R_E0))
         fill_saturation_inputs(self.sat, o, kin, self.params.a_max)
         admitted = o.admitted and may_admit
-        ref, clamped = None, False
+        ref, clamped, at = None, False, _NO_ROWS
         if admitted:
             q, dq, ddq, clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, self.params.dt)
             ref = (q, dq, ddq)
+        elif may_admit:
+            saturated, rows, at, clamped = self._saturation_stage(self.sat, Minv, kin.q, kin.dq, self.params)
+            ref = (rows[0], rows[1], rows[2]) if saturated else None
         wrenches = {"rcm": o.W_r, "interaction": o.W_h, "tracking": o.W_c, "viscous": o.W_f, **extra.by_name}
         return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, o.W_n, o.tau, o.delta, o.contacts,
-                           o.non_finite, admitted, ref, bool(clamped))
+                           o.non_finite, admitted, ref, bool(clamped), at)
 
     def _extra(self, ctx: TickContext) -> _Extra:
         """The extra sources' wrenches, the points they are taken about, their summed damping matrix."""

@@ -261,6 +261,9 @@ class Controller:
         s = self.compiled.sat
         if r.admitted:
             sat = SaturationResult(s.a_d, (), (), True)  # nothing to saturate: the common case
+        elif r.ref is not None:  # saturated by the compiled step with every row hard: the next common case
+            names = self._box_names + tuple(WALL_NAMES[i] for i in s.wall)
+            sat = SaturationResult(r.ref[2], tuple(names[i] for i in np.flatnonzero(r.at_bound)), (), True)
         else:
             n = s.a_d.shape[0]
             m = n + 4 if self.params.envelope_enabled else n

@@ -9,16 +9,78 @@ both to 1e-9).
 Compilation happens in :func:`lapwrench.tick_core.warm_up`, which the controller calls when it
 is built, before any robot moves; the first build on a fresh clone takes tens of seconds, later
 ones load the cache.
+
+**The cache is keyed by the source of every kernel module.** numba invalidates a cached function
+only when *its own* file changes, not when a function it calls (in another file) does: after an
+edit or an upgrade that changes ``motion/qp.py`` alone, ``tick_core``'s cached tick would still run
+the old solver. So the cache lives in a directory named by a hash of every module of this package
+that defines kernels (:func:`cache_dir`): any change to any of them starts a fresh cache. Constants
+a kernel reads are frozen into its machine code, so they live in kernel modules too.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import shutil
+import tempfile
+import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import numba
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+_PACKAGE = Path(__file__).resolve().parent
+_KEEP_CACHES = 4  # older cache directories (other source versions) are pruned beyond this many
+
+
+def source_hash() -> str:
+    """SHA-256 (16 hex digits) of every module of the package that defines or configures kernels."""
+    h = hashlib.sha256()
+    for path in sorted(_PACKAGE.rglob("*.py")):
+        text = path.read_bytes()
+        if b"@kernel" in text or b"njit" in text or path.name == "jit.py":
+            h.update(str(path.relative_to(_PACKAGE)).encode() + b"\0" + text + b"\0")
+    return h.hexdigest()[:16]
+
+
+def cache_dir() -> Path:
+    """Where the compiled kernels are cached: ``$NUMBA_CACHE_DIR`` (default ``~/.cache/lapwrench/numba``,
+    or the temp folder when that is not writable) / :func:`source_hash`."""
+    roots = [Path(os.environ["NUMBA_CACHE_DIR"])] if os.environ.get("NUMBA_CACHE_DIR") else []
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    roots += [Path(xdg) / "lapwrench" / "numba", Path(tempfile.gettempdir()) / f"lapwrench-numba-{os.getuid()}"]
+    key = source_hash()
+    for root in roots:
+        try:
+            (root / key).mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(root / key, os.W_OK):
+            _prune(root, key)
+            return root / key
+    raise RuntimeError(f"no writable folder for the compiled kernels among {[str(r) for r in roots]}")
+
+
+def _prune(root: Path, keep: str) -> None:
+    """Remove cache folders of other source versions beyond the newest few (older than a day)."""
+    try:
+        others = sorted((d for d in root.iterdir() if d.is_dir() and d.name != keep),
+                        key=lambda d: d.stat().st_mtime, reverse=True)
+    except OSError:
+        return
+    for d in others[_KEEP_CACHES:]:
+        try:
+            if time.time() - d.stat().st_mtime > 86400:
+                shutil.rmtree(d, ignore_errors=True)
+        except OSError:
+            pass
+
+
+numba.config.CACHE_DIR = str(cache_dir())
 
 
 def kernel(fn: F) -> F:

@@ -11,8 +11,11 @@ kinematics and M⁻¹ once per tick; everything after that is two compiled calls
    the envelope rows.
 
 Between them the controller evaluates any extra (Python) wrench sources on the tick's geometry.
-The limits are then met by :func:`lapwrench.motion.saturation.saturate` only when the desired
-acceleration breaks one of them, and :func:`~lapwrench.motion.reference_shaper.advance_reference`
+When the desired acceleration breaks a limit, :func:`saturation_stage` meets the joint box and
+the envelope by changing the lower-priority motion only (the exact QP of
+:mod:`lapwrench.motion.saturation`, compiled); only when that has no solution (the envelope must
+give way, or the RCM task cannot be kept) does the controller run the Python levels of
+:func:`lapwrench.motion.saturation.saturate`. :func:`~lapwrench.motion.reference_shaper.advance_reference`
 gives the next reference. Each equation is the one function of its module, compiled
 (:mod:`lapwrench.jit`); nothing here re-derives one.
 """
@@ -34,8 +37,9 @@ from lapwrench.config import Config
 from lapwrench.jit import kernel
 from lapwrench.motion.envelope import EnvelopeParams, envelope_rows
 from lapwrench.motion.measured_feedback import FEEDBACK_TIME, feedback_step
+from lapwrench.motion.qp import QP_SOLVED
 from lapwrench.motion.reference_shaper import acceleration_bounds, advance_reference
-from lapwrench.motion.saturation import VIOLATION_TOL
+from lapwrench.motion.saturation import VIOLATION_TOL, at_bound, solve_exact
 from lapwrench.motion.virtual_model import (
     damping_jacobian,
     euler_velocity_step,
@@ -317,6 +321,27 @@ def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinemati
 
 
 @kernel
+def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickParams) -> tuple:  # type: ignore[type-arg]
+    """Step 7 when the desired acceleration breaks a limit: the joint box and the envelope met as hard
+    rows with the RCM task kept (:func:`~lapwrench.motion.saturation.solve_exact`), then the next
+    reference. Returns (solved, ref rows [q⁺, q̇⁺, q̈⁺], which rows are at a bound, clamped); not
+    solved (no solution with every row hard, or a non-finite demand) leaves the step to Python."""
+    n = q.shape[0]
+    m = n + 4 if p.envelope_enabled else n
+    ref = np.zeros((3, n))
+    at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
+    if not np.isfinite(sat.a_d).all():
+        return False, ref, at, False
+    C, lo, hi, scale = sat.C[:m], sat.lo[:m], sat.hi[:m], sat.scale[:m]
+    a, status = solve_exact(Minv, sat.a_d, sat.J_task, C, lo, hi, scale)
+    if status != QP_SOLVED:
+        return False, ref, at, False
+    ref[0], ref[1], ref[2], clamped = advance_reference(q, dq, a, sat.lo[:n], sat.hi[:n], p.dt)
+    at[:m] = at_bound(C, lo, hi, scale, a)
+    return True, ref, at, clamped
+
+
+@kernel
 def tick_stage(
     terms: KinematicTerms,
     Minv: Mat,
@@ -342,14 +367,14 @@ def tick_stage(
 ) -> tuple:  # type: ignore[type-arg]
     """The whole compiled tick in one call, when there are no extra sources: the kinematics from
     Pinocchio's terms, ΔF (eq 19) when the F/T and the robot's estimate are both valid,
-    :func:`geometry_stage`, :func:`motion_stage`, and — when the desired acceleration meets every
-    limit (and ``may_admit``) — the next reference. Otherwise ``sat`` holds what the saturation
-    step needs and the caller advances the reference.
+    :func:`geometry_stage`, :func:`motion_stage`, and (with ``may_admit``) the next reference:
+    directly when the desired acceleration meets every limit, through :func:`saturation_stage`
+    when it does not. When neither gives it, ``sat`` holds what the Python saturation levels need.
 
     Returns packed arrays (numba returns a few arrays much faster than many):
     ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows
-    [q⁺, q̇⁺, q̈⁺] (valid when admitted), τ, and the scalars (δ, n_c, has ΔF, non-finite, admitted,
-    clamped).
+    [q⁺, q̇⁺, q̈⁺] (valid when admitted or saturated), which limit rows are at a bound, τ, and the
+    scalars (δ, n_c, has ΔF, non-finite, admitted, saturated, clamped).
     """
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
@@ -366,8 +391,11 @@ def tick_stage(
     W = np.empty((5, 6))
     W[0], W[1], W[2], W[3], W[4] = o.W_r, o.W_h, o.W_c, o.W_f, o.W_n
     ref = np.zeros((3, kin.q.shape[0]))
+    at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
     admitted = o.admitted and may_admit
-    clamped = False
+    saturated, clamped = False, False
     if admitted:
         ref[0], ref[1], ref[2], clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, p.dt)
-    return vec3, W, ref, o.tau, o.delta, o.contacts, has_residual, o.non_finite, admitted, clamped
+    elif may_admit:
+        saturated, ref, at, clamped = saturation_stage(sat, Minv, kin.q, kin.dq, p)
+    return vec3, W, ref, at, o.tau, o.delta, o.contacts, has_residual, o.non_finite, admitted, saturated, clamped

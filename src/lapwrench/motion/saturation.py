@@ -13,7 +13,8 @@ solves greedily, by saturating the most violated joint at its bound until the re
 saturation can miss a solution that exists: on 40 random states with random null-space demands it
 found none in 16 cases where one did (tests/core/test_saturation.py keeps those cases). So the
 problem is solved exactly, as a small hierarchical QP, with the Goldfarb-Idnani dual active-set
-method (``quadprog``, a few µs for 7 joints):
+method (compiled, :mod:`lapwrench.motion.qp`, a few µs for 7 joints; ``quadprog`` for the rarer
+levels below and as the fallback when round-off defeats the compiled solver):
 
 1. the RCM task and the robot's joint limits, together (hard constraints);
 2. the envelope: first as hard constraints too (the common case, the smaller QP); if levels 1
@@ -35,6 +36,7 @@ import numpy as np
 import quadprog
 
 from lapwrench.jit import kernel
+from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED, dual_active_set
 from lapwrench.spatial import Mat, Vec
 
 # A row is active when its violation by a_d exceeds this fraction of its scale (round-off guard),
@@ -142,14 +144,26 @@ def exact_qp(a_d: Vec, M: Mat, J: Mat, C: Mat, lo: Vec, hi: Vec, scale: Vec) -> 
     return M.copy(), M @ a_d, A, b
 
 
+@kernel
+def solve_exact(Minv: Mat, a_d: Vec, J: Mat, C: Mat, lo: Vec, hi: Vec, scale: Vec) -> tuple[Vec, int]:
+    """Level 1 and 2 as hard rows, compiled: min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d and
+    lo <= C a <= hi, every row widened by BOX_WIDENING of its scale (:func:`~lapwrench.motion.qp.dual_active_set`)."""
+    max_iter = 4 * (J.shape[0] + 2 * C.shape[0]) + 20
+    return dual_active_set(Minv, a_d, J, C, lo, hi, BOX_WIDENING * scale, scale, max_iter)
+
+
 def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
     """min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d and every row; None if infeasible."""
     f = np.ascontiguousarray
-    G, a, A, b = exact_qp(f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64),
-                          f(rows.C, dtype=np.float64), f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64),
-                          f(rows.scale, dtype=np.float64))
-    try:
-        return quadprog.solve_qp(G, a, A, b, J.shape[0])[0]
+    a_d, M, J, C = f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64), f(rows.C, dtype=np.float64)
+    lo, hi, scale = f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64), f(rows.scale, dtype=np.float64)
+    a, status = solve_exact(np.linalg.inv(M), a_d, J, C, lo, hi, scale)
+    if status == QP_SOLVED:
+        return a
+    if status == QP_INFEASIBLE:
+        return None
+    try:  # round-off defeated the compiled solver: quadprog's updated factorisations
+        return quadprog.solve_qp(*exact_qp(a_d, M, J, C, lo, hi, scale), J.shape[0])[0]
     except ValueError:  # "constraints are inconsistent" or linearly dependent
         return None
 
