@@ -114,7 +114,10 @@ def _fresh(stamp: object, now: float, max_age: float) -> bool:
     """A real, finite stamp at most ``max_age`` before ``now`` (and not after it by more than that)."""
     if type(stamp) not in (float, int) and not isinstance(stamp, np.floating | np.integer):
         return False
-    stamp = float(stamp)  # type: ignore[arg-type]
+    try:
+        stamp = float(stamp)  # type: ignore[arg-type]
+    except OverflowError:  # an int beyond any float, e.g. 10**400
+        return False
     return math.isfinite(stamp) and abs(now - stamp) <= max_age if math.isfinite(now) else False
 
 

@@ -159,9 +159,10 @@ def test_event_memory_is_bounded_but_every_event_is_counted() -> None:
     assert ctrl.event_counts["tactile"] == n
 
 
-@pytest.mark.parametrize("stamp", [None, "0.1", float("nan"), 39.0, -39.0])
+@pytest.mark.parametrize("stamp", [None, "0.1", float("nan"), 39.0, -39.0, pytest.param(10**400, id="10**400")])
 def test_a_detection_with_a_bad_stamp_is_not_used(stamp: object) -> None:
-    """No stamp, a string, NaN, 39 s in the future or in the past: the detection is dropped with an event."""
+    """No stamp, a string, NaN, 39 s in the future or in the past, an int beyond any float (raised
+    OverflowError, found by the fuzz suite): the detection is dropped with an event."""
     ctrl = Controller(load())
     ctrl.reset(DEFAULT_Q0)
     res = ctrl.tick(_frame(0.0, instruments=InstrumentObservation(FAR.points, stamp)))  # type: ignore[arg-type]

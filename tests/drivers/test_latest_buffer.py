@@ -141,11 +141,35 @@ def test_rate_monitor_wraparound_and_restart() -> None:
     assert rm.stats().drops == 0
     rm2 = RateMonitor(restart_gap=100)
     assert rm2.check_seq(50_000)
+    assert rm2.check_seq(50_001)  # two in order: the stream is anchored
     assert not rm2.check_seq(1)  # device restarted its counter? not until the next packet confirms it
     assert rm2.check_seq(2)  # confirmed: one resync, no drops
     assert not rm2.check_seq(2)
     st = rm2.stats()
     assert st.resyncs == 1 and st.drops == 0 and st.out_of_order == 2
+
+
+def test_a_near_sequence_jump_is_taken_back_when_the_stream_goes_on_from_before_it() -> None:
+    """Found by the fuzz suite: one packet numbered last + 90 made the next 89 good ones out-of-order."""
+    rm = RateMonitor()
+    for s in range(10, 15):
+        assert rm.check_seq(s)
+    assert rm.check_seq(14 + 90)  # provisionally: maybe 89 packets were lost
+    assert all(rm.check_seq(s) for s in range(15, 60))  # no: the stream goes on from before it
+    st = rm.stats()
+    assert st.drops == 0 and st.out_of_order == 0
+    assert rm.check_seq(62) and rm.check_seq(63) and not rm.check_seq(61)  # a real loss (confirmed), a late one
+    st = rm.stats()
+    assert st.drops == 2 and st.out_of_order == 1
+
+
+def test_a_bad_first_sequence_number_anchors_nothing() -> None:
+    """Found by the fuzz suite: a first packet numbered 500 ahead made the next 500 good ones out-of-order."""
+    rm = RateMonitor()
+    assert rm.check_seq(500)  # the first number: nothing to compare it with
+    assert all(rm.check_seq(s) for s in range(0, 50))  # the next one does not follow it: it anchors nothing
+    st = rm.stats()
+    assert st.drops == 0 and st.out_of_order == 0
 
 
 def test_one_far_sequence_jump_costs_one_packet_and_no_drop_count() -> None:

@@ -262,3 +262,83 @@ def test_a_non_finite_box_is_never_a_detection(make_layout_model) -> None:
     boxes, _scores, _ = det.decode([out])
     assert len(boxes) == 1 and np.isfinite(boxes).all()
     np.testing.assert_allclose(boxes[0], [290.0, 290.0, 310.0, 310.0])
+
+
+# -- found by the fuzz suite (tests/fuzz/test_fuzz_models.py) -------------------------------------
+
+
+def test_an_integer_output_model_is_refused(tmp_path) -> None:
+    """Issue 11 item 8: an integer-output model was accepted silently (every score 0 or 1)."""
+    out = np.zeros((1, 4 + 2, 20), np.int64)
+    out[0, :4, 0], out[0, 4, 0] = [160, 160, 40, 30], 1
+    path = make_constant_yolo_onnx(tmp_path / "int.onnx", {"output0": out}, input_hw=(320, 320))
+    with pytest.raises(ModelError, match="output 'output0' has dtype int64; YOLO boxes and scores must be floating"):
+        OnnxYoloDetector(path)
+
+
+def test_an_integer_num_dets_and_classes_are_fine_in_the_split_layout(make_layout_model) -> None:
+    det = OnnxYoloDetector(make_layout_model("yolov7_e2e_split"))
+    assert det.layout.layout is OutputLayout.YOLOV7_E2E_SPLIT
+
+
+@pytest.mark.parametrize(
+    "meta",
+    [{"stride": "inf"}, {"stride": "0"}, {"names": "{'a': 'x'}"}, {"names": "[" * 500}, {"imgsz": "[[1], [2]]"},
+     {"imgsz": "[0, 0]"}, {"imgsz": "[100000, 100000]"}],
+    ids=["stride-inf", "stride-0", "names-str-keys", "names-deep", "imgsz-nested", "imgsz-zero", "imgsz-huge"],
+)
+def test_unreadable_metadata_falls_back_to_the_defaults(make_layout_model, frame, meta) -> None:
+    """A bad metadata value raised OverflowError/ValueError/TypeError or a cv2 error out of the loader."""
+    det = OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True, metadata=meta))
+    assert det.stride in (32, 1) and det.input_hw == (640, 640)
+    assert len(det.detect(frame)) == 3
+
+
+def test_a_bad_input_size_is_a_model_error(make_layout_model) -> None:
+    with pytest.raises(ModelError, match="input_size"):
+        OnnxYoloDetector(make_layout_model("yolov8", (320, 320), dynamic=True), input_size=0)
+
+
+def test_scores_are_in_0_1_and_junk_candidates_are_dropped(make_layout_model) -> None:
+    """An inf score was a detection with score inf; a logit of 5 a score of 5; a box at 1e30 and a
+    NaN class were candidates."""
+    det = OnnxYoloDetector(make_layout_model("yolov8", (640, 640)))
+    out = np.zeros((1, 4 + 3, 5), dtype=np.float32)
+    out[0, :4, :] = [[100.0], [100.0], [20.0], [20.0]]
+    out[0, 4, 0] = np.inf  # dropped
+    out[0, 4, 1] = 5.0  # an un-squashed logit: counts as 1
+    out[0, 4, 2] = 0.9
+    out[0, :4, 2] = [1e30, 100.0, 20.0, 20.0]  # junk box: dropped
+    out[0, 5, 3] = 0.8  # class 1, fine
+    boxes, scores, cls = det.decode([out])
+    np.testing.assert_allclose(scores, [1.0, 0.8])
+    assert cls.tolist() == [0, 1] and np.isfinite(boxes).all()
+
+
+def test_a_negative_detection_count_selects_nothing(tmp_path) -> None:
+    """num_dets = -1 sliced [: -1]: every junk row but the last became a candidate."""
+    outputs = {
+        "num_dets": np.array([[-1]], np.int32),
+        "det_boxes": np.full((1, 5, 4), 10.0, np.float32) + np.array([0, 0, 50, 50], np.float32),
+        "det_scores": np.full((1, 5), 0.9, np.float32),
+        "det_classes": np.zeros((1, 5), np.int32),
+    }
+    det = OnnxYoloDetector(make_constant_yolo_onnx(tmp_path / "split.onnx", outputs))
+    assert len(det.decode(list(outputs.values()))[0]) == 0
+
+
+def test_a_huge_box_does_not_switch_nms_off_for_the_other_boxes() -> None:
+    """Per-class NMS offset the boxes by class x the largest coordinate: one box at 1e30 rounded every
+    other box onto a point, and two overlapping boxes of one class were both kept."""
+    from lapwrench.perception.boxes import nms
+
+    boxes = np.array([[1e30, 0, 2e30, 10], [0, 0, 10, 10], [1, 0, 11, 10]], np.float64)
+    keep = nms(boxes, np.array([0.9, 0.8, 0.7]), 0.45, np.array([0, 1, 1]))
+    assert keep.tolist() == [0, 1]
+
+
+def test_a_model_error_is_one_short_line() -> None:
+    """A runtime's error may run over many lines; the user gets one line naming the file."""
+    exc = ModelError("m.onnx", "first line\nsecond line\n" * 100)
+    assert "\n" not in str(exc) and str(exc).startswith("m.onnx: first line second line")
+    assert len(exc.problem) <= ModelError.MAX_PROBLEM

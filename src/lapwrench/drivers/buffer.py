@@ -196,6 +196,8 @@ class RateMonitor:
         self._restart_gap = restart_gap
         self._resync_gap = resync_gap
         self._pending_seq: int | None = None
+        self._jump: tuple[int, int] | None = None  # (sequence before, drops counted) of a provisional jump
+        self._anchored = False  # two packets in order seen since the sequence was (re)started
         self._resyncs = 0
         self._times: deque[float] = deque(maxlen=max_events)
         self._lock = threading.Lock()
@@ -215,15 +217,34 @@ class RateMonitor:
         device restart) or a corrupt packet; it is accepted only when the next packet continues from
         it (it then counts one resync, not the packets in between as drops). Until then it is
         discarded and the stream goes on from the old number, so one bad packet costs one packet.
+
+        A near forward jump (``1 < k <= resync_gap``) is accepted at once, but provisionally: when
+        the very next packet continues the sequence from *before* the jump, the jumped packet was
+        the odd one out (a corrupt sequence number, or one packet reordered) and the stream goes on
+        from the older number, its drops taken back. Without this, one packet numbered ``last + 90``
+        would discard the next 89 good ones as out-of-order. Likewise the first packet (after
+        :meth:`forget_seq`) anchors nothing until the next one follows it: a corrupt first number
+        would otherwise discard up to ``restart_gap`` good packets.
         """
         with self._lock:
             last = self._last_seq
+            jump, self._jump = self._jump, None
             if last is None:
-                self._last_seq = seq
+                self._last_seq, self._anchored = seq, False
                 return True
             diff = self._signed(seq - last)
             if 1 <= diff <= self._resync_gap:
                 self._drops += diff - 1
+                self._last_seq, self._pending_seq, self._anchored = seq, None, True
+                if diff > 1:
+                    self._jump = (last, diff - 1)
+                return True
+            if not self._anchored:  # no two packets in order yet: the first number is no better than this one
+                self._last_seq = seq
+                return True
+            if jump is not None and 1 <= self._signed(seq - jump[0]) < self._signed(last - jump[0]):
+                before, counted = jump  # the jumped packet was the outlier: go on from before it
+                self._drops += self._signed(seq - before) - 1 - counted
                 self._last_seq, self._pending_seq = seq, None
                 return True
             if diff <= 0 and -diff <= self._restart_gap:
@@ -260,7 +281,7 @@ class RateMonitor:
     def forget_seq(self) -> None:
         """Forget the last device sequence number (call when the device stream is restarted)."""
         with self._lock:
-            self._last_seq = None
+            self._last_seq = self._pending_seq = self._jump = None
 
     def add_drops(self, n: int = 1) -> None:
         """Add ``n`` drops detected by other means (e.g. a lost camera frame)."""
@@ -304,4 +325,4 @@ class RateMonitor:
             self._times.clear()
             self._count = self._drops = self._out_of_order = self._late = self._resyncs = 0
             self._last_time = None
-            self._last_seq = self._pending_seq = None
+            self._last_seq = self._pending_seq = self._jump = None

@@ -188,9 +188,9 @@ def nms(
     scores = np.asarray(scores, dtype=np.float64).reshape(-1)
     if boxes.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    if class_ids is not None:
-        span = float(np.abs(boxes).max()) + 1.0
-        boxes = boxes + (np.asarray(class_ids, dtype=np.float64).reshape(-1, 1) * 2.0 * span)
+    # per class: a box only competes with boxes of its own class (a mask, not offsetting the boxes per
+    # class, which loses every box to rounding once one box or class id is huge)
+    classes = None if class_ids is None else np.asarray(class_ids).reshape(-1)
     order = np.argsort(-scores, kind="stable")
     keep: list[int] = []
     while order.size:
@@ -201,5 +201,8 @@ def nms(
         rest = order[1:]
         if rest.size == 0:
             break
-        order = rest[box_iou(boxes[i], boxes[rest]) <= iou_threshold]
+        survive = ~(box_iou(boxes[i], boxes[rest]) > iou_threshold)  # only a definite overlap suppresses
+        if classes is not None:
+            survive |= classes[rest] != classes[i]
+        order = rest[survive]
     return np.asarray(keep, dtype=np.int64)

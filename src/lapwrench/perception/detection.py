@@ -34,10 +34,16 @@ class FrameError(PerceptionError, ValueError):
 class ModelError(PerceptionError):
     """A model file is missing, corrupt, or has an output layout that cannot be decoded."""
 
+    MAX_PROBLEM = 300
+    """Longest problem text kept (a runtime's error can run over many lines)."""
+
     def __init__(self, path: object, problem: str) -> None:
         self.path = str(path)
-        self.problem = problem
-        super().__init__(f"{self.path}: {problem}")
+        one_line = " ".join(str(problem).split())  # one line, whatever the runtime's message held
+        if len(one_line) > self.MAX_PROBLEM:
+            one_line = one_line[: self.MAX_PROBLEM - 3] + "..."
+        self.problem = one_line
+        super().__init__(f"{self.path}: {one_line}")
 
 
 class BackendUnavailableError(PerceptionError, ImportError):

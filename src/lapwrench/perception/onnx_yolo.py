@@ -54,6 +54,10 @@ from lapwrench.perception.detection import (
 DEFAULT_INPUT_SIZE = 640
 MAX_CANDIDATES = 3000
 """Raw candidates above the score threshold kept (best first) before NMS."""
+MAX_INPUT_SIDE = 8192
+"""Largest network input side accepted (from the model, its ``imgsz`` metadata or ``input_size``)."""
+BOX_RANGE = 4.0
+"""A candidate box reaching beyond this many input sizes from the input is junk and dropped."""
 
 _SPLIT_NAMES = {
     "num": ("num_dets", "num_detections", "num"),
@@ -177,19 +181,53 @@ def _static_dim(d: Any) -> int | None:
     return int(d) if isinstance(d, int) and d > 0 else None
 
 
-def _parse_names(meta: dict[str, str]) -> dict[int, str] | None:
-    text = meta.get("names")
-    if not text:
+def _literal(text: str | None) -> object:
+    """A metadata value parsed as a Python literal, or None when it is not one (metadata is a hint:
+    a model with unreadable metadata still loads, with the defaults)."""
+    if not text or len(text) > 100_000:
         return None
     try:
-        parsed = ast.literal_eval(text)
-    except (ValueError, SyntaxError):
+        return ast.literal_eval(text)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
         return None
+
+
+def _parse_names(meta: dict[str, str]) -> dict[int, str] | None:
+    """Class names from ultralytics' ``names`` metadata (``{0: 'a', ...}`` or ``['a', ...]``), else None."""
+    parsed = _literal(meta.get("names"))
     if isinstance(parsed, dict):
-        return {int(k): str(v) for k, v in parsed.items()}
+        if not all(type(k) is int for k in parsed):
+            return None
+        return {k: str(v) for k, v in parsed.items()}
     if isinstance(parsed, list | tuple):
         return {i: str(v) for i, v in enumerate(parsed)}
     return None
+
+
+def _parse_stride(meta: dict[str, str]) -> int:
+    """The model's stride from its metadata: a whole number in [1, 256], else YOLO's usual 32."""
+    try:
+        stride = float(meta.get("stride", 32))
+    except (TypeError, ValueError):
+        return 32
+    return int(stride) if 1.0 <= stride <= 256.0 else 32
+
+
+def _valid_size(hw: tuple[object, object]) -> bool:
+    """Two whole sizes in [1, MAX_INPUT_SIDE]."""
+    return all(type(d) is int and 1 <= d <= MAX_INPUT_SIDE for d in hw)
+
+
+def _floating_outputs(path: Path, layout: LayoutInfo, names: list[str], outputs: Sequence[object]) -> None:
+    """The tensors holding boxes and scores must be floating point (item 8 of issue 11: an integer
+    output was accepted silently, and every score was rounded to 0 or 1)."""
+    roles = layout.outputs[1:3] if layout.layout is OutputLayout.YOLOV7_E2E_SPLIT else layout.outputs[:1]
+    for i in roles:
+        dtype = getattr(outputs[i], "dtype", None)
+        if dtype is None or np.dtype(dtype).kind != "f":
+            kind = np.dtype(dtype).name if dtype is not None else type(outputs[i]).__name__
+            raise ModelError(path, f"output '{names[i]}' has dtype {kind}; YOLO boxes and scores must be "
+                                   "floating point (float32/float16)")
 
 
 TTA_FUSION_IOU = 0.55
@@ -266,10 +304,7 @@ class OnnxYoloDetector:
             self.class_names = meta_names
         if num_classes is None and meta_names:
             num_classes = len(meta_names)
-        try:
-            self.stride = max(int(float(meta.get("stride", 32))), 1)
-        except ValueError:
-            self.stride = 32
+        self.stride = _parse_stride(meta)
 
         self._setup_input(input_size, meta)
 
@@ -283,7 +318,9 @@ class OnnxYoloDetector:
             outputs = self.session.run(None, {self.input_name: blob})
         except Exception as exc:
             raise ModelError(path, f"model failed to run on a {blob.shape} input ({exc})") from exc
-        observed = [(n, np.asarray(o).shape) for n, o in zip(self.output_names, outputs, strict=True)]
+        if not all(isinstance(o, np.ndarray) for o in outputs):
+            raise ModelError(path, "every output must be a tensor (found a sequence or map output)")
+        observed = [(n, o.shape) for n, o in zip(self.output_names, outputs, strict=True)]
         if layout == "auto":
             end2end = str(meta.get("end2end", "")).lower() == "true"
             try:
@@ -292,6 +329,7 @@ class OnnxYoloDetector:
                 raise ModelError(path, f"unknown YOLO output layout: {exc}") from exc
         else:
             self.layout = self._forced_layout(OutputLayout(layout), observed, num_classes)
+        _floating_outputs(path, self.layout, self.output_names, outputs)
 
     # -- setup -------------------------------------------------------------------------------
 
@@ -312,7 +350,12 @@ class OnnxYoloDetector:
         wanted: tuple[int, int] | None = None
         if input_size is not None:
             wanted = (input_size, input_size) if isinstance(input_size, int) else tuple(input_size)  # type: ignore[assignment]
+            if len(wanted) != 2 or not _valid_size(wanted):  # type: ignore[arg-type]
+                raise ModelError(self.model_path, f"configured input_size {str(input_size)[:60]} is not two sizes "
+                                                  f"in [1, {MAX_INPUT_SIDE}]")
         if h is not None and w is not None:
+            if not _valid_size((h, w)):
+                raise ModelError(self.model_path, f"model input of {h}x{w} (HxW) is beyond {MAX_INPUT_SIDE} px")
             if wanted is not None and wanted != (h, w):
                 raise ModelError(self.model_path, f"model has a fixed input of {h}x{w} (HxW); "
                                                   f"configured input_size {wanted} differs")
@@ -326,15 +369,10 @@ class OnnxYoloDetector:
 
     @staticmethod
     def _meta_imgsz(meta: dict[str, str]) -> tuple[int, int] | None:
-        try:
-            val = ast.literal_eval(meta.get("imgsz", ""))
-        except (ValueError, SyntaxError):
-            return None
-        if isinstance(val, int):
-            return (val, val)
-        if isinstance(val, list | tuple) and len(val) == 2:
-            return (int(val[0]), int(val[1]))
-        return None
+        """The ``imgsz`` metadata as (h, w) if it is one or two sizes in [1, MAX_INPUT_SIDE], else None."""
+        val = _literal(meta.get("imgsz"))
+        hw = (val, val) if type(val) is int else tuple(val) if isinstance(val, list | tuple) else ()
+        return hw if len(hw) == 2 and _valid_size(hw) else None  # type: ignore[return-value]
 
     def _warmup_frame_hw(self) -> tuple[int, int]:
         if self.config.frame_size is not None:
@@ -381,55 +419,68 @@ class OnnxYoloDetector:
     def decode(self, outputs: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Raw model outputs -> candidate ``(boxes xyxy input px, scores, class ids)`` above threshold.
 
-        The class filter is applied; NMS is not.
+        The class filter is applied; NMS is not. Whatever the model emits, a candidate has a finite
+        box within :data:`BOX_RANGE` input sizes of the input, a finite class and a score in
+        ``(threshold, 1]`` (a score above 1, e.g. an un-squashed logit, counts as 1); any other
+        candidate is dropped.
         """
+        with np.errstate(invalid="ignore", over="ignore"):
+            boxes, scores, cls = self._raw_candidates(outputs)
+            boxes = np.asarray(boxes, dtype=np.float32).reshape(-1, 4)
+            scores = np.asarray(scores, dtype=np.float32).reshape(-1)
+            cls_f = np.asarray(cls, dtype=np.float64).reshape(-1)
+            reach = BOX_RANGE * max(self.input_hw)
+            # NaN compares False: a non-finite score, box or class drops the candidate here
+            keep = (scores > self.config.score_threshold) & (scores < np.inf) & (np.abs(cls_f) < 2**31)
+            keep &= (np.abs(boxes) <= reach).all(axis=1)
+        cls = cls_f[keep].astype(np.int64)
+        if self.config.classes is not None:
+            wanted = np.isin(cls, np.fromiter(self.config.classes, dtype=np.int64))
+            keep[keep] = wanted
+            cls = cls[wanted]
+        boxes, scores = boxes[keep], np.minimum(scores[keep], np.float32(1.0))
+        if len(scores) > MAX_CANDIDATES:
+            top = np.argpartition(-scores, MAX_CANDIDATES)[:MAX_CANDIDATES]
+            boxes, scores, cls = boxes[top], scores[top], cls[top]
+        return boxes, scores, cls
+
+    def _raw_candidates(self, outputs: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Boxes (xyxy input px), scores and classes as the layout holds them, unchecked."""
         thr = self.config.score_threshold
         info = self.layout
         lay = info.layout
         if lay is OutputLayout.YOLOV7_E2E_SPLIT:
             num_o, box_o, score_o, cls_o = (np.asarray(outputs[i]) for i in info.outputs)
-            n = int(num_o.reshape(-1)[0]) if num_o.size else 0
-            boxes = box_o.reshape(-1, 4)[:n].astype(np.float32)
-            scores = score_o.reshape(-1)[:n].astype(np.float32)
-            cls = cls_o.reshape(-1)[:n].astype(np.int64)
-        elif lay is OutputLayout.YOLOV7_E2E:
+            k = min(box_o.size // 4, score_o.size, cls_o.size)
+            n = float(num_o.reshape(-1)[0]) if num_o.size else 0.0
+            n_i = int(min(max(n, 0.0), k)) if np.isfinite(n) else 0  # a negative count would slice from the end
+            return box_o.reshape(-1, 4)[:n_i], score_o.reshape(-1)[:n_i], cls_o.reshape(-1)[:n_i]
+        if lay is OutputLayout.YOLOV7_E2E:
             out = np.asarray(outputs[info.outputs[0]], dtype=np.float32).reshape(-1, 7)
             out = out[out[:, 0] == 0]
-            boxes, cls, scores = out[:, 1:5], out[:, 5].astype(np.int64), out[:, 6]
-        elif lay is OutputLayout.E2E_XYXY_SCORE_CLS:
+            return out[:, 1:5], out[:, 6], out[:, 5]
+        if lay is OutputLayout.E2E_XYXY_SCORE_CLS:
             out = np.asarray(outputs[info.outputs[0]], dtype=np.float32)[0]
-            boxes, scores, cls = out[:, :4], out[:, 4], out[:, 5].astype(np.int64)
-        else:
-            out = np.asarray(outputs[info.outputs[0]], dtype=np.float32)
-            if out.ndim != 3 or out.shape[0] != 1:
-                raise PerceptionError(f"{self.model_path}: unexpected output shape {out.shape} for {lay}")
-            if lay is OutputLayout.YOLOV8:
-                pred = out[0].T  # [N, 4+nc]
-                if pred.shape[1] < 5:
-                    raise PerceptionError(f"{self.model_path}: output {out.shape} too narrow for {lay}")
-                cls_scores = pred[:, 4:]
-                cls = cls_scores.argmax(axis=1)
-                scores = cls_scores[np.arange(len(cls)), cls]
-                keep = scores > thr
-                pred, cls, scores = pred[keep], cls[keep], scores[keep]
-            else:  # YOLOV5 / YOLOv7 raw
-                pred = out[0]
-                if pred.shape[1] < 6:
-                    raise PerceptionError(f"{self.model_path}: output {out.shape} too narrow for {lay}")
-                pred = pred[pred[:, 4] > thr]  # objectness bounds the final score
-                cls_scores = pred[:, 5:] * pred[:, 4:5]
-                cls = cls_scores.argmax(axis=1)
-                scores = cls_scores[np.arange(len(cls)), cls]
-            boxes = xywh_to_xyxy(pred[:, :4])
-        # NaN compares False: a non-finite score is dropped here; a non-finite box with it
-        keep = (scores > thr) & np.isfinite(boxes).all(axis=1)
-        if self.config.classes is not None:
-            keep &= np.isin(cls, np.fromiter(self.config.classes, dtype=np.int64))
-        boxes, scores, cls = boxes[keep], scores[keep], cls[keep]
-        if len(scores) > MAX_CANDIDATES:
-            top = np.argpartition(-scores, MAX_CANDIDATES)[:MAX_CANDIDATES]
-            boxes, scores, cls = boxes[top], scores[top], cls[top]
-        return boxes, scores, cls
+            return out[:, :4], out[:, 4], out[:, 5]
+        out = np.asarray(outputs[info.outputs[0]], dtype=np.float32)
+        if out.ndim != 3 or out.shape[0] != 1:
+            raise PerceptionError(f"{self.model_path}: unexpected output shape {out.shape} for {lay}")
+        if lay is OutputLayout.YOLOV8:
+            pred = out[0].T  # [N, 4+nc]
+            if pred.shape[1] < 5:
+                raise PerceptionError(f"{self.model_path}: output {out.shape} too narrow for {lay}")
+            cls_scores = pred[:, 4:]
+        else:  # YOLOV5 / YOLOv7 raw
+            pred = out[0]
+            if pred.shape[1] < 6:
+                raise PerceptionError(f"{self.model_path}: output {out.shape} too narrow for {lay}")
+            pred = pred[pred[:, 4] > thr]  # objectness bounds the final score
+            cls_scores = pred[:, 5:] * pred[:, 4:5]
+        cls = cls_scores.argmax(axis=1)
+        scores = cls_scores[np.arange(len(cls)), cls]
+        keep = scores > thr
+        pred, cls, scores = pred[keep], cls[keep], scores[keep]
+        return xywh_to_xyxy(pred[:, :4]), scores, cls
 
     def detect(self, image: np.ndarray) -> list[Detection]:
         """Instrument detections in one ``H x W x 3`` uint8 frame, best score first.
