@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import json
 import subprocess
 import sys
 import threading
@@ -285,34 +286,142 @@ def test_images_as_jpeg_bytes_and_as_arrays(tmp_path: Path) -> None:
     assert base64.b64decode(images[1]["data"]) == b"\xff\xd8\xff\xe0fake"
 
 
-def test_truncated_and_foreign_files_give_a_clean_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    path = tmp_path / "run.mcap"
-    write(path, 300)
-    data = path.read_bytes()
+# -- truncated and broken files (issue 11, item 9) ---------------------------------------------------
+N_LONG = 3000  # cycles: 4 chunks of foxglove-sdk's default size, so a cut can fall between and inside them
+
+
+@pytest.fixture(scope="module")
+def long_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[str, Any]]]:
+    """A complete log of ``N_LONG`` cycles, and its cycles read back."""
+    path = tmp_path_factory.mktemp("long") / "run.mcap"
+    write(path, N_LONG)
+    return path, read_log(path)[0]
+
+
+def report(path: Path, out: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = log_report_main(argparse.Namespace(log=str(path), out=str(out)))
+    printed = capsys.readouterr()
+    assert "Traceback" not in printed.out + printed.err
+    return code, printed.out, printed.err
+
+
+def chunk_offsets(path: Path) -> list[int]:
+    """Where each chunk record starts (from the summary's chunk indexes)."""
+    from mcap.reader import make_reader
+
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return sorted(ci.chunk_start_offset for ci in summary.chunk_indexes)
+
+
+@pytest.mark.parametrize("cut", ["last byte", "half", "inside the chunk being written"])
+def test_a_truncated_log_is_read_as_far_as_it_goes(
+    cut: str,
+    long_log: tuple[Path, list[dict[str, Any]]],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    full, cycles = long_log
+    data = full.read_bytes()
+    path = tmp_path / "cut.mcap"
+    if cut == "last byte":
+        path.write_bytes(data[:-1])
+    elif cut == "half":
+        path.write_bytes(data[: len(data) // 2])
+    else:  # killed while a chunk streams to the file: foxglove-sdk's header holds a 2**64 - 1 placeholder length
+        at = chunk_offsets(full)[2]
+        path.write_bytes(data[:at] + bytes([0x06]) + (2**64 - 1).to_bytes(8, "little") + data[at + 9 : at + 2000])
+    log = load_log(path, allow_truncated=True)
+    assert log.truncated is not None and log.truncated.size == path.stat().st_size
+    n = len(log.cycles)
+    # a clean prefix of the run, every cycle bit for bit: nothing from a cut or half-written chunk
+    assert 0 < n <= N_LONG and log.cycles == cycles[:n]
+    assert log.meta == {"robot": "test", "n": N_LONG} and len(log.events) == 1
+    assert log.topics[CYCLE_TOPIC].messages == n
+    if cut == "last byte":  # only the closing magic is incomplete: everything is there
+        assert n == N_LONG and log.stats is not None and log.truncated.missing == "closing magic incomplete"
+    else:
+        assert n < N_LONG and log.stats is None and log.truncated.missing == "no summary/footer"
+    with pytest.raises(LogFileError, match="truncated"):
+        read_log(path)  # the strict reader still refuses it
+    code, out, err = report(path, tmp_path / "report", capsys)
+    assert code == 0 and "summary.json" in out
+    t_last = cycles[n - 1]["t"]
+    assert err.strip() == (
+        f"lapwrench log-report: {path} is truncated ({log.truncated.missing}); read {n} cycles up to t={t_last:.3f} s"
+    )
+    for name in ("rcm_error.png", "wrenches.png", "mode.png", "joint_commands.png"):
+        assert (tmp_path / "report" / name).stat().st_size > 5000
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert summary["cycles"] == n and summary["truncated"]["missing"] == log.truncated.missing
+
+
+def test_a_damaged_chunk_in_a_truncated_log_is_corruption_not_data(
+    long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The stream reader checks each chunk's CRC: a flipped byte is an error, never garbled cycles."""
+    full, _ = long_log
+    data = bytearray(full.read_bytes()[: 3 * full.stat().st_size // 4])
+    data[chunk_offsets(full)[1] + 500] ^= 0xFF  # inside the second chunk's compressed records
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogFileError, match="corrupt"):
+        load_log(path, allow_truncated=True)
+    code, out, err = report(path, tmp_path / "report", capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "corrupt" in err and not out
+
+
+def test_files_that_cannot_be_read_give_one_line_and_exit_2(
+    long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    full, _ = long_log
+    data = full.read_bytes()
+    files = {
+        "header.mcap": data[:20],  # inside the header record: no cycle at all
+        "magic.mcap": data[:5],
+        "garbage.mcap": b"not a log\n" * 100,
+        "empty.mcap": b"",
+        "damaged.mcap": data[: len(data) // 3] + bytes(64) + data[len(data) // 3 + 64 :],  # complete, corrupt
+    }
+    for name, content in files.items():
+        (tmp_path / name).write_bytes(content)
+    (tmp_path / "folder.mcap").mkdir()
+    cases = {
+        "header.mcap": "truncated MCAP file (20 bytes, no summary/footer) with no complete /lapwrench/cycle message",
+        "magic.mcap": "truncated MCAP file (5 bytes, cut inside the magic)",
+        "garbage.mcap": "not an MCAP file",
+        "empty.mcap": "empty file (0 bytes), not an MCAP log",
+        "damaged.mcap": "corrupt MCAP file",
+        "folder.mcap": "is a directory, not a log file",
+        "none.mcap": "no such log file",
+    }
+    for name, words in cases.items():
+        path = tmp_path / name
+        code, out, err = report(path, tmp_path / "report", capsys)
+        assert code == 2 and not out, (name, out)
+        assert err.startswith(f"lapwrench log-report: {path}: {words}") and len(err.strip().splitlines()) == 1, err
+        if name == "header.mcap":  # readable as far as it goes: nothing
+            assert load_log(path, allow_truncated=True).cycles == []
+        else:
+            with pytest.raises(LogFileError):
+                load_log(path, allow_truncated=True)
+    assert not (tmp_path / "report").exists()
+
+
+def test_the_command_line_reports_a_truncated_log_and_refuses_a_foreign_one(
+    long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path
+) -> None:
+    full, _ = long_log
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(data[: len(data) // 2])
+    cut.write_bytes(full.read_bytes()[: full.stat().st_size // 2])
     foreign = tmp_path / "foreign.mcap"
     foreign.write_text("not a log\n")
-    damaged = tmp_path / "damaged.mcap"
-    damaged.write_bytes(data[: len(data) // 3] + bytes(64) + data[len(data) // 3 + 64 :])
-    out = tmp_path / "report"
-    cases = (
-        (cut, "truncated"),
-        (foreign, "not an MCAP file"),
-        (damaged, "corrupt"),
-        (tmp_path / "none.mcap", "no such"),
-    )
-    for bad, words in cases:
-        assert log_report_main(argparse.Namespace(log=str(bad), out=str(out))) == 2
-        printed = capsys.readouterr()
-        assert words in printed.out and "Traceback" not in printed.out + printed.err
-    with pytest.raises(LogFileError, match="truncated"):
-        read_log(cut)
-    # the real command line: non-zero exit, one line, no traceback
-    proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))",
-         "log-report", str(cut), "--out", str(out)],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
-    assert proc.returncode == 2 and "truncated" in proc.stdout
-    assert "Traceback" not in proc.stdout + proc.stderr
+    script = "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))"
+    for path, code, words in ((cut, 0, "is truncated (no summary/footer); read "), (foreign, 2, "not an MCAP file")):
+        proc = subprocess.run(
+            [sys.executable, "-c", script, "log-report", str(path), "--out", str(tmp_path / "report")],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert proc.returncode == code and words in proc.stderr, proc.stderr
+        assert "Traceback" not in proc.stdout + proc.stderr and len(proc.stderr.strip().splitlines()) == 1

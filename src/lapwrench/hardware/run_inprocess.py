@@ -4,23 +4,34 @@ detector threads share the GIL with the loop)."""
 from __future__ import annotations
 
 import argparse
-import json
+import math
 import sys
-import threading
+import time
 from typing import Any
 
 from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _open_sources
-from lapwrench.hardware.run_common import _error_exit, _install_sigint, _restore_sigint
+from lapwrench.hardware.run_common import RunInterrupted, StopSignals, _error_exit, print_summary, stop_reason
 
 
 def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
-    """The former single-process loop (``--in-process``): sensor and detector threads share the GIL."""
+    """The former single-process loop (``--in-process``): sensor and detector threads share the GIL.
+    SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
+    with StopSignals() as signals:
+        try:
+            return _run_in_process_signalled(args, cfg, signals)
+        except RunInterrupted as exc:
+            return exc.report()
+
+
+def _run_in_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSignals) -> int:
     from lapwrench import config as config_mod
     from lapwrench.robot.interface import RobotError
 
     devices = _Devices()
     logger = None
-    script = DryRunScript() if args.dry_run else None
+    # the script's clock starts when the loop does (as in the process path): until then the handle
+    # is untouched (F/T tare), and a slow start-up does not play the pushes to nobody
+    script = DryRunScript(t0=math.inf) if args.dry_run else None
     try:
         sources, described = _open_sources(args, cfg, devices, script)
         loop, robot_desc = _build_loop(args, cfg, sources, script)
@@ -39,22 +50,28 @@ def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
                 },
             )
             loop.logger = logger
-        stop = threading.Event()
-        previous = _install_sigint(stop)
-        try:
-            loop.start()
-            print(f"lapwrench run: {robot_desc} connected; devices: {described or 'none'}", file=sys.stderr)
-            stats = loop.run(args.duration, stop)
-        finally:
-            _restore_sigint(previous)
+        stop = signals.arm()  # from here on a signal asks for the stop to rest
+        loop.start()
+        print(f"lapwrench run: {robot_desc} connected; devices: {described or 'none'}", file=sys.stderr)
+        if script is not None:
+            script.t0 = time.monotonic()
+        stats = loop.run(args.duration, stop)  # type: ignore[arg-type]
+        if logger is not None and stop.reason is not None and stop.at is not None:
+            logger.event(loop.session_time(stop.at), "stop_requested", f"{stop.reason}: stopping to rest")
     except (CliError, RobotError) as exc:
         return _error_exit(exc)
     finally:
+        signals.closing()  # the log is finalized whatever arrives now
         devices.close()
         if logger is not None:
             logger.close()
-    summary = {**stats.summary(), "log": args.log, "process": "in-process"}
-    print(json.dumps(summary))
+    summary = {
+        **stats.summary(),
+        "stop_reason": stop_reason(signals.stop, stats),
+        "log": args.log,
+        "process": "in-process",
+    }
+    print_summary(summary)
     return 1 if stats.alarm else 0
 
 

@@ -6,20 +6,27 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import sys
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
 from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _simulated_devices, parse_camera, parse_ft_url
-from lapwrench.hardware.run_common import _error_exit, _install_sigint, _restore_sigint
+from lapwrench.hardware.run_common import RunInterrupted, StopSignals, _error_exit, print_summary, stop_reason
 
 
 def _run_process(args: argparse.Namespace, cfg: Any) -> int:
-    """The loop in its own process, the detector in another; this one feeds, logs and waits."""
+    """The loop in its own process, the detector in another; this one feeds, logs and waits.
+    SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
+    with StopSignals() as signals:
+        try:
+            return _run_process_signalled(args, cfg, signals)
+        except RunInterrupted as exc:
+            return exc.report()
+
+
+def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSignals) -> int:
     from lapwrench import config as config_mod
     from lapwrench.drivers import DeviceError, SerialTactileArray
     from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec
@@ -112,27 +119,25 @@ def _run_process(args: argparse.Namespace, cfg: Any) -> int:
                 },
             )
             rp.set_logger(logger)
-        stop = threading.Event()
-        previous = _install_sigint(stop)
-        try:
-            print(f"lapwrench run: {ready.get('robot')} ready; devices: {described or 'none'}", file=sys.stderr)
-            t0 = time.monotonic()
-            if script is not None:
-                script.t0 = t0
-            if fake_ft is not None:
-                fake_ft.set_t0(t0)
-            result = rp.run(args.duration, stop, script_t0=None if script is None else t0)
-        finally:
-            _restore_sigint(previous)
+        stop = signals.arm()  # from here on a signal asks for the stop to rest
+        print(f"lapwrench run: {ready.get('robot')} ready; devices: {described or 'none'}", file=sys.stderr)
+        t0 = time.monotonic()
+        if script is not None:
+            script.t0 = t0
+        if fake_ft is not None:
+            fake_ft.set_t0(t0)
+        result = rp.run(args.duration, stop, script_t0=None if script is None else t0)
     except (CliError, RobotError) as exc:
         return _error_exit(exc)
     finally:
+        signals.closing()  # the log is finalized whatever arrives now
         devices.close()
         if logger is not None:
             logger.close()
     stats, report = result.stats, result.report
     summary = {
         **stats.summary(),
+        "stop_reason": stop_reason(signals.stop, stats, report.get("stop_signal")),
         "log": args.log,
         "process": "rt",
         "ft_fresh_pct": round(100.0 * report["ft_fresh_cycles"] / max(1, report["hook_cycles"]), 3)
@@ -140,7 +145,7 @@ def _run_process(args: argparse.Namespace, cfg: Any) -> int:
         else None,
         "log_dropped_records": report.get("log_dropped"),
     }
-    print(json.dumps(summary))
+    print_summary(summary)
     return 1 if stats.alarm else 0
 
 

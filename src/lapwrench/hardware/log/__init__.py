@@ -74,9 +74,12 @@ Reading
 the log stats and the topics with their schema names and message counts; :func:`iter_messages`
 decodes any message (JSON, so the logs of the earlier JSON-only logger too; the cycle with
 :func:`decode_cycle`; Foxglove's protobuf messages through the schemas in the file). A missing,
-truncated or corrupt file raises :class:`LogFileError` with a plain message, which
+corrupt or foreign file raises :class:`LogFileError` with a plain message, which
 :func:`log_report_main` (``lapwrench log-report``: PNG plots of RCM error, wrenches, mode and
-joint commands, summary.json with the logger's drop counts) prints instead of a traceback.
+joint commands, summary.json with the logger's drop counts) prints instead of a traceback. A
+truncated file (no closing magic: the run was killed) is refused by :func:`read_log`; ``load_log(path,
+allow_truncated=True)`` and ``lapwrench log-report`` read it as far as it goes with mcap's stream
+reader (whole, CRC-checked chunks only) and say so (:class:`Truncation`).
 
 Modules
 -------
@@ -120,6 +123,7 @@ from lapwrench.hardware.log.reader import (
     LogContents,
     LogFileError,
     TopicInfo,
+    Truncation,
     check_log_file,
     iter_messages,
     load_log,
@@ -133,6 +137,8 @@ from lapwrench.hardware.log.report import (
     add_log_report_arguments,
     log_report_main,
     make_report,
+    truncation_note,
+    write_report,
 )
 from lapwrench.hardware.log.topics import (
     CYCLE_TOPIC,
@@ -200,6 +206,7 @@ __all__ = [
     "RunLogger",
     "ScopeFrames",
     "TopicInfo",
+    "Truncation",
     "add_log_report_arguments",
     "check_log_file",
     "cycle_descriptor",
@@ -216,5 +223,7 @@ __all__ = [
     "make_report",
     "pose_message",
     "read_log",
+    "truncation_note",
     "wrench_scene_message",
+    "write_report",
 ]

@@ -1,17 +1,24 @@
 """``lapwrench log-report``: PNG plots of a run log (RCM error, wrenches, mode, joint commands),
-``summary.json`` (with the logger's drop counts and the topics) and ``events.json``. A log that
-cannot be read gives one plain line and exit code 2, never a traceback."""
+``summary.json`` (with the logger's drop counts and the topics) and ``events.json``.
+
+A truncated log (the run was killed before it closed its log) is read as far as it goes: one line
+on stderr, ``lapwrench log-report: run.mcap is truncated (no summary/footer); read 1547 cycles up to
+t=1.546 s``, the report of what was read (``"truncated"`` in summary.json) and exit code 0. A log
+that cannot be read at all (missing, a directory, empty, not MCAP, corrupt, or cut before its
+first cycle) gives one line on stderr and exit code 2, never a traceback."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from lapwrench.hardware.log.reader import LogContents, LogFileError, check_log_file, load_log
+from lapwrench.hardware.log.reader import LogContents, LogFileError, load_log
 from lapwrench.hardware.log.topics import CYCLE_TOPIC
 
 _QUIET_EVENTS = ("start", "deadline_miss", "log_dropped")
@@ -112,22 +119,33 @@ def _summary(log: LogContents, t: np.ndarray) -> dict[str, Any]:
         "compute_p50_us": _nan_stat(lambda x: np.percentile(x, 50), compute),
         "compute_p99_us": _nan_stat(lambda x: np.percentile(x, 99), compute),
         "events": len(log.events),
+        "truncated": None if log.truncated is None else dataclasses.asdict(log.truncated),
         "log_dropped": None if log.stats is None else log.stats.get("dropped"),
         "log_stats": log.stats,
         "topics": {k: {"schema": v.schema, "messages": v.messages} for k, v in sorted(log.topics.items())},
     }
 
 
-def make_report(path: str | Path, out: str | Path) -> list[Path]:
-    """Write the report PNGs (and summary.json, events.json) for a log into ``out``."""
+def make_report(path: str | Path, out: str | Path, *, allow_truncated: bool = True) -> list[Path]:
+    """Write the report PNGs (and summary.json, events.json) for a log into ``out``; a truncated
+    log is reported as far as it goes (unless not ``allow_truncated``)."""
+    return write_report(load_log(path, allow_truncated=allow_truncated), path, out)
+
+
+def write_report(log: LogContents, path: str | Path, out: str | Path) -> list[Path]:
+    """The report of a log already read (:func:`~lapwrench.hardware.log.reader.load_log`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    log = load_log(path)
     cycles = [c for c in log.cycles if c.get("t") is not None]
     if not cycles:
+        if log.truncated is not None:
+            raise LogFileError(
+                f"{path}: truncated MCAP file ({log.truncated.size} bytes, {log.truncated.missing})"
+                f" with no complete {CYCLE_TOPIC} message"
+            )
         raise LogFileError(f"{path}: no {CYCLE_TOPIC} messages")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -152,23 +170,36 @@ def _save(fig: Any, path: Path) -> Path:
     return path
 
 
+def truncation_note(path: str | Path, log: LogContents) -> str | None:
+    """The line that says a log is truncated and how much of it was read (``None``: complete)."""
+    if log.truncated is None:
+        return None
+    ts = [c["t"] for c in log.cycles if isinstance(c.get("t"), int | float)]
+    upto = f" up to t={max(ts):.3f} s" if ts else ""
+    return f"lapwrench log-report: {path} is truncated ({log.truncated.missing}); read {len(log.cycles)} cycles{upto}"
+
+
 def log_report_main(args: argparse.Namespace) -> int:
-    """``lapwrench log-report LOG --out DIR``: plots of a run log. Returns the exit code."""
-    log = Path(args.log)
+    """``lapwrench log-report LOG --out DIR``: plots of a run log. Returns the exit code: 0 (also
+    for a truncated log, reported as far as it goes, with one line on stderr), 2 for a log that
+    cannot be read or a report that cannot be written (one line on stderr)."""
+    path = Path(args.log)
     try:
-        check_log_file(log)
-        files = make_report(log, args.out)
+        log = load_log(path, allow_truncated=True)
+        files = write_report(log, path, args.out)
     except LogFileError as exc:
-        print(f"lapwrench log-report: {exc}")
+        print(f"lapwrench log-report: {exc}", file=sys.stderr)
         return 2
-    except Exception as exc:
-        print(f"lapwrench log-report: cannot read {log}: {type(exc).__name__}: {exc}")
+    except Exception as exc:  # the report folder, matplotlib: one line, never a traceback
+        print(f"lapwrench log-report: cannot report {path}: {type(exc).__name__}: {str(exc)[:120]}", file=sys.stderr)
         return 2
+    note = truncation_note(path, log)
+    if note is not None:
+        print(note, file=sys.stderr)
     for f in files:
         print(f)
-    stats = json.loads((Path(args.out) / "summary.json").read_text()).get("log_stats")
-    if stats is not None:
-        print(f"logger: {stats.get('cycles')} cycles written, {stats.get('dropped')} dropped")
+    if log.stats is not None:
+        print(f"logger: {log.stats.get('cycles')} cycles written, {log.stats.get('dropped')} dropped")
     return 0
 
 

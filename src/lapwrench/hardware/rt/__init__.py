@@ -40,10 +40,16 @@ What happens on each fault
   Franka, libfranka's controller stops the arm by itself when commands stop arriving
   (``communication_constraints_violation``), which is the stop of last resort; franky-sim and the
   simulated robot just stop stepping.
-* **Ctrl-C / SIGTERM in the parent**: the CLI sets the stop request in shared memory; the child's
-  loop stops to rest through the supervisor, sends its statistics, and the parent flushes the log.
+* **SIGINT (Ctrl-C), SIGTERM or SIGHUP in the parent** (:mod:`lapwrench.hardware.run_common`): the
+  CLI sets the stop request in shared memory and logs ``stop_requested`` with the signal's name;
+  the child's loop stops to rest through the supervisor, sends its statistics, and the parent
+  finalizes the log and prints the summary (``stop_reason``). Further signals meanwhile are
+  ignored with a "please wait" line. The stop stays bounded: the loop's own stop deadline
+  (``RtSpec.stop_timeout``, robot time), the heartbeat watch, and ``RtProcess.stop_wait`` (30 s of
+  wall time from the request to the end of the child's loop; then it is killed as hung).
   The child ignores SIGINT (the terminal sends it to the whole process group) and treats its own
-  SIGTERM as a stop request.
+  SIGTERM or SIGHUP (a closed terminal hangs up the whole group) as a stop request, reported as
+  ``stop_signal``.
 
 Real-time settings (:class:`RtOptions`): SCHED_FIFO and CPU affinity when permitted, one warning
 when not (like panda-py), and the garbage collector frozen in the loop.

@@ -89,14 +89,15 @@ class _CycleHooks:
 
 
 class _StopFlag:
-    """``is_set()`` for ControlLoop.run: the parent's stop request or this process's SIGTERM."""
+    """``is_set()`` for ControlLoop.run: the parent's stop request, or a SIGTERM or SIGHUP to this
+    process (``signal``: its name)."""
 
     def __init__(self, ctl: np.ndarray) -> None:
         self.ctl = ctl
-        self.term = False
+        self.signal: str | None = None
 
     def is_set(self) -> bool:
-        return self.term or bool(self.ctl[CTL_STOP])
+        return self.signal is not None or bool(self.ctl[CTL_STOP])
 
 
 def _open_ft(spec: FtSpec) -> Any:
@@ -138,20 +139,24 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which asks for the stop
     stop_flag: _StopFlag | None = None
-    pending_term = [False]
+    pending: list[str] = []
 
     def on_term(signum: int, frame: Any) -> None:
-        pending_term[0] = True
-        if stop_flag is not None:
-            stop_flag.term = True
+        # SIGTERM, or SIGHUP (a closed terminal hangs up the whole process group): the stop to rest,
+        # never the default death that would leave the arm without commands mid-motion
+        if not pending:
+            pending.append(signal.Signals(signum).name)
+        if stop_flag is not None and stop_flag.signal is None:
+            stop_flag.signal = pending[0]
 
     signal.signal(signal.SIGTERM, on_term)
+    signal.signal(signal.SIGHUP, on_term)
     bus = ft = watch = None
     try:
         bus = Bus.attach(bus_name, bus_layout(spec.log_rows, spec.event_rows))
         ctl = bus["ctl"]
         stop_flag = _StopFlag(ctl)
-        stop_flag.term = pending_term[0]
+        stop_flag.signal = pending[0] if pending else None
         sink = ShmLogSink(bus.ring("log"), bus.ring("events"), cycles=spec.log_cycles)
         problems = apply_realtime(spec.rt)
         for p in problems:
@@ -215,7 +220,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
         ctl[CTL_PHASE] = PHASE_DONE
         report = hooks.report()
         report.update(log_dropped=bus.ring("log").dropped, events_dropped=bus.ring("events").dropped,
-                      encode_errors=sink.encode_errors)
+                      encode_errors=sink.encode_errors, stop_signal=stop_flag.signal)
         if extra is not None and hasattr(extra, "report"):
             report.update(extra.report())
         conn.send(("done", stats, report))

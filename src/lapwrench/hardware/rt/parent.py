@@ -46,6 +46,9 @@ class RtProcess:
         child_timeout: Child heartbeat age (s) that counts as a hang.
         connect_timeout: Seconds the child may take from "go" to its first cycle (robot connect).
         feed_period: Feeder period (s).
+        stop_wait: Wall seconds the child's loop may take from the stop request to its end (its own
+            stop deadline is ``spec.stop_timeout`` of robot time); beyond that it counts as hung and
+            is killed, so a requested stop is bounded even if the child keeps beating.
     """
 
     def __init__(
@@ -60,6 +63,7 @@ class RtProcess:
         child_timeout: float = 0.5,
         connect_timeout: float = 60.0,
         feed_period: float = 0.001,
+        stop_wait: float = 30.0,
         start_method: str = "spawn",
     ) -> None:
         if start_method not in ("spawn", "forkserver"):
@@ -73,6 +77,7 @@ class RtProcess:
         self.child_timeout = child_timeout
         self.connect_timeout = connect_timeout
         self.feed_period = feed_period
+        self.stop_wait = stop_wait
         self.ctx = mp.get_context(start_method)
         self.bus = Bus.create(bus_layout(spec.log_rows, spec.event_rows))
         self.codec = CycleCodec()
@@ -170,7 +175,9 @@ class RtProcess:
     def run(self, duration: float | None = None, stop_event: Any = None, *, script_t0: float | None = None) -> RtResult:
         """Let the child connect and run; serve it until it is done.
 
-        ``stop_event.is_set()`` requests the child's clean stop to rest (Ctrl-C in the CLI).
+        ``stop_event.is_set()`` requests the child's clean stop to rest (a signal in the CLI); its
+        ``reason`` attribute, if any, is logged with the ``stop_requested`` event. From the request
+        on, the child's loop has ``stop_wait`` seconds to end.
 
         Raises:
             RtProcessError: the child died, hung, or reported a robot/device/internal error.
@@ -180,12 +187,15 @@ class RtProcess:
         self._t_go = time.monotonic()
         self._conn.send(("go", script_t0, self.spec.duration if duration is None else duration))
         ctl, beat = self.bus["ctl"], self.bus["beat"]
-        stop_sent = False
+        stop_sent: float | None = None
+        running_since: float | None = None
         try:
             while True:
-                if stop_event is not None and not stop_sent and stop_event.is_set():
+                if stop_event is not None and stop_sent is None and stop_event.is_set():
                     ctl[CTL_STOP] = 1
-                    stop_sent = True
+                    stop_sent = time.monotonic()
+                    reason = getattr(stop_event, "reason", None) or "stop requested"
+                    self._parent_event("stop_requested", f"{reason}: stopping to rest")
                 if self._conn.poll(0.01):
                     msg = self._recv()
                     if msg[0] == "done":
@@ -204,6 +214,23 @@ class RtProcess:
                     msg = (
                         f"the real-time process (pid {self.proc.pid}) did not start its loop within"
                         f" {self.connect_timeout:.0f} s of the go (robot connect hung?); killed"
+                    )
+                    self._parent_event("rt_process_hung", msg)
+                    self.kill()
+                    self.drain()
+                    raise _error("hung", msg)
+                if phase == PHASE_RUNNING and running_since is None:
+                    running_since = time.monotonic()
+                if (
+                    running_since is not None
+                    and stop_sent is not None
+                    and phase == PHASE_RUNNING
+                    and time.monotonic() - max(stop_sent, running_since) > self.stop_wait
+                ):  # counted from the request, or from the loop's start if asked during the robot connect
+                    msg = (
+                        f"the real-time process (pid {self.proc.pid}) did not end its stop within"
+                        f" {self.stop_wait:.0f} s of the request; killed. A Franka stops by itself when commands"
+                        " stop (libfranka communication_constraints_violation)"
                     )
                     self._parent_event("rt_process_hung", msg)
                     self.kill()
