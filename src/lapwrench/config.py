@@ -1,15 +1,21 @@
 """Configuration: one YAML file, validated on load.
 
 The defaults (``data/default.yaml``) are the paper's Sec. IV-A parameters. Loading checks every
-key against these dataclasses: an unknown key, a wrong type, a non-positive gain or threshold,
-or an inconsistent pair (epsilon2 <= epsilon1, gamma2 <= gamma1) raises :class:`ConfigError`
-naming the key.
+key against these dataclasses: an unknown key, a wrong type, a value outside its physical range
+or an inconsistent pair (epsilon2 <= epsilon1, u0 outside the image, ...) raises
+:class:`ConfigError` naming the key (and, from a file, its line).
+
+Every number has a range (``_range("[lo, hi]", default, why)``, brackets closed, parentheses
+open) chosen from what makes physical sense for the Franka arm, the 64-element tactile handle and a
+laparoscope; the ``why`` text is shown in the error. The file itself is read by
+:mod:`lapwrench.config_yaml`: at most 1 MiB of UTF-8, no aliases or anchors, no duplicate keys.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import typing
 from dataclasses import dataclass, field
 from importlib import resources
@@ -18,27 +24,70 @@ from typing import Any, Literal
 
 import yaml
 
+from lapwrench import config_yaml
+from lapwrench.config_yaml import short
+
 Ramp = Literal["printed", "c1"]
+TactileChecksum = Literal["none", "sum8", "xor8", "crc16-modbus"]
+
+TACTILE_ELEMENTS = 64  # elements of the handle's grip array (lapwrench.sensors.TACTILE_ELEMENTS)
+TACTILE_MAX_VALUE = 255  # largest element reading
 
 
 class ConfigError(ValueError):
-    """A configuration value is missing, unknown, of the wrong type or out of range."""
+    """A configuration value is missing, unknown, of the wrong type or out of range.
+
+    ``key`` is the dotted key path the error is about (``"rcm.Kp"``), when there is one.
+    """
+
+    def __init__(self, message: str, key: str | None = None) -> None:
+        super().__init__(message)
+        self.key = key
 
 
-def _positive(**kw: Any) -> Any:
-    return field(metadata={"check": "positive"}, **kw)
+@dataclass(frozen=True)
+class Range:
+    """An interval ``lo .. hi`` with open or closed ends, and why a value must lie in it."""
+
+    lo: float
+    hi: float
+    lo_open: bool
+    hi_open: bool
+    why: str = ""
+
+    def __contains__(self, x: float) -> bool:
+        above = x > self.lo if self.lo_open else x >= self.lo
+        below = x < self.hi if self.hi_open else x <= self.hi
+        return above and below
+
+    def __str__(self) -> str:
+        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
 
 
-def _nonnegative(**kw: Any) -> Any:
-    return field(metadata={"check": "nonnegative"}, **kw)
+_INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")
+
+
+def _interval(spec: str, why: str) -> Range:
+    """Parse ``"(0, 1]"``-style interval notation (``pi`` allowed as a bound)."""
+    m = _INTERVAL.match(spec)
+    if m is None:
+        raise ValueError(f"bad interval {spec!r}")
+    lo, hi = (math.pi if b == "pi" else float(b) for b in (m[2], m[3]))
+    return Range(lo, hi, m[1] == "(", m[4] == ")", why)
+
+
+def _range(spec: str, default: Any, why: str = "") -> Any:
+    """A dataclass field whose value must lie in ``spec`` (interval notation); ``why`` says why."""
+    return field(default=default, metadata={"range": _interval(spec, why)})
 
 
 @dataclass(frozen=True)
 class RobotConfig:
     kind: Literal["panda", "fr3"] = "panda"
-    control_rate_hz: float = _positive(default=1000.0)
-    limit_fraction: float = _positive(default=0.9)
-    position_margin: float = _nonnegative(default=0.05)
+    # the `run` and `demo` commands further require 1000 (the Franka differentiates over 1 ms)
+    control_rate_hz: float = _range("[1, 10000]", 1000.0, "Hz, a control rate")
+    limit_fraction: float = _range("[0.05, 1]", 0.9, "fraction of the Franka limits; below 5% the arm barely moves")
+    position_margin: float = _range("[0, 0.5]", 0.05, "rad; more would shrink some Franka joint ranges to nothing")
 
     @property
     def dt(self) -> float:
@@ -47,44 +96,46 @@ class RobotConfig:
 
 @dataclass(frozen=True)
 class ScopeConfig:
-    length: float = _positive(default=0.29)
-    lambda0: float = _positive(default=0.8)
-    handle_offset: float = _nonnegative(default=0.04)
-    oblique_angle_deg: float = _nonnegative(default=0.0)
+    length: float = _range("[0.1, 0.6]", 0.29, "m, laparoscopes are 0.1-0.6 m long")
+    lambda0: float = _range("(0, 1)", 0.8, "fraction of the scope length where the RCM point starts")
+    handle_offset: float = _range("[0, 0.5]", 0.04, "m along the shaft, and shorter than scope.length")
+    oblique_angle_deg: float = _range("[0, 90)", 0.0, "degrees of view angle off the shaft (0, 30, 45, 70)")
 
 
 @dataclass(frozen=True)
 class InteractionConfig:
-    k_H: float = _positive(default=2000.0)
-    k_min: int = _nonnegative(default=3)
-    contact_threshold: int = _nonnegative(default=0)
-    force_range: float = _positive(default=200.0)
-    torque_range: float = _positive(default=10.0)
+    k_H: float = _range("[200, 100000]", 2000.0, "delta = sum(Se)/k_H; below 200 a full grip gives delta > 80")
+    k_min: int = _range(f"[0, {TACTILE_ELEMENTS - 1}]", 3, "contacts needed: n_c > k_min of the 64 elements")
+    contact_threshold: int = _range(
+        f"[0, {TACTILE_MAX_VALUE - 1}]", 0, "an element reads 0..255; at 255 nothing ever counts as contact"
+    )
+    force_range: float = _range("[1, 2000]", 200.0, "N, an F/T sensor's measuring range (HEX-E: 200)")
+    torque_range: float = _range("[0.1, 200]", 10.0, "N m, an F/T sensor's measuring range (HEX-E: 10)")
 
 
 @dataclass(frozen=True)
 class CameraConfig:
-    width: int = _positive(default=640)
-    height: int = _positive(default=480)
-    fx: float = _positive(default=506.57)
-    fy: float = _positive(default=506.72)
-    u0: float = _positive(default=312.22)
-    v0: float = _positive(default=243.39)
+    width: int = _range("[16, 8192]", 640, "pixels")
+    height: int = _range("[16, 8192]", 480, "pixels")
+    fx: float = _range("[10, 100000]", 506.57, "pixels, a focal length")
+    fy: float = _range("[10, 100000]", 506.72, "pixels, a focal length")
+    u0: float = _range("(0, 8192)", 312.22, "pixels, inside the image width")
+    v0: float = _range("(0, 8192)", 243.39, "pixels, inside the image height")
 
 
 @dataclass(frozen=True)
 class TrackingConfig:
-    epsilon1: float = _positive(default=50.0)
-    epsilon2: float = _positive(default=200.0)
-    F_max: float = _positive(default=10.0)
+    epsilon1: float = _range("(0, 12000)", 50.0, "pixels, inside the image diagonal")
+    epsilon2: float = _range("(0, 12000]", 200.0, "pixels, beyond epsilon1")
+    F_max: float = _range("(0, 50]", 10.0, "N, about what a hand pushes a scope with")
     ramp: Ramp = "printed"
     direction: Literal["printed", "image_plane"] = "image_plane"
 
 
 @dataclass(frozen=True)
 class RcmConfig:
-    Kp: float = _positive(default=300.0)
-    Kd: float = _positive(default=20.0)
+    Kp: float = _range("(0, 10000]", 300.0, "N/m: 10 N at 1 mm; stiffer rings through the arm's admittance")
+    Kd: float = _range("(0, 2000]", 20.0, "N s/m; beyond, damping swamps the arm's inertia and the solve breaks")
 
 
 @dataclass(frozen=True)
@@ -98,48 +149,52 @@ class AdaptiveRcmConfig:
     """
 
     enabled: bool = True
-    F_op: float = _positive(default=10.0)
-    gamma1: float = _positive(default=5.0)
-    gamma2: float = _positive(default=15.0)
+    F_op: float = _range("(0, 100]", 10.0, "N, saturation of the mapped residual force")
+    gamma1: float = _range("(0, 100]", 5.0, "N, dead zone of the residual force")
+    gamma2: float = _range("(0, 200]", 15.0, "N, saturation of the residual force, beyond gamma1")
     ramp: Ramp = "printed"
-    alpha: float = _positive(default=0.003)
-    beta: float = _positive(default=0.05)
-    epsilon: float = _positive(default=5e-4)
+    alpha: float = _range("(0, 0.05]", 0.003, "m/(N s); alpha F_op is how fast the RCM point moves")
+    beta: float = _range("(0, 10]", 0.05, "1/s, leakage to the anchor")
+    epsilon: float = _range("(0, 0.1]", 5e-4, "m/s, anchor update threshold")
     gate: Literal["speed", "none"] = "speed"
-    gate_angular_speed: float = _positive(default=0.2)  # rad/s, |P ω_E|: no adaptation above
-    gate_linear_speed: float = _positive(default=0.1)  # m/s, |v_E| of the flange: no adaptation above
-    gate_angular_acceleration: float = _positive(default=2.0)  # rad/s^2, filtered |P ω̇_E|: no adaptation above
-    gate_linear_acceleration: float = _positive(default=2.0)  # m/s^2, filtered |v̇_E|: no adaptation above
-    gate_soft: float = _nonnegative(default=0.5)  # fraction of each threshold where w starts to fall (1: hard gate)
-    gate_filter_time: float = _nonnegative(default=0.02)  # s, time constant of the acceleration filter
-    gate_release_time: float = _nonnegative(default=0.1)  # s, w re-opens from 0 to 1 at most this fast
+    # no adaptation above each of these (the Franka's flange moves at most ~2 m/s)
+    gate_angular_speed: float = _range("(0, 10]", 0.2, "rad/s, |P ω_E|")
+    gate_linear_speed: float = _range("(0, 2]", 0.1, "m/s, |v_E| of the flange")
+    gate_angular_acceleration: float = _range("(0, 100]", 2.0, "rad/s^2, filtered |P ω̇_E|")
+    gate_linear_acceleration: float = _range("(0, 50]", 2.0, "m/s^2, filtered |v̇_E|")
+    gate_soft: float = _range("[0, 1]", 0.5, "fraction of each threshold where w starts to fall (1: hard gate)")
+    gate_filter_time: float = _range("[0, 10]", 0.02, "s, time constant of the acceleration filter")
+    gate_release_time: float = _range("[0, 10]", 0.1, "s, w re-opens from 0 to 1 at most this fast")
 
     def __post_init__(self) -> None:
         if not self.gate_soft <= 1.0:
-            raise ConfigError(f"config key 'adaptive_rcm.gate_soft' must lie in [0, 1], got {self.gate_soft}")
+            key = "adaptive_rcm.gate_soft"
+            raise ConfigError(f"config key '{key}' must lie in [0, 1], got {short(self.gate_soft)}", key)
         if self.gate == "speed" and self.gate_soft * self.gate_linear_speed < self.alpha * self.F_op:
             # p_R moves at up to α F_op and the scope follows it: the gate must not throttle that motion
             raise ConfigError(
                 f"config key 'adaptive_rcm.gate_linear_speed' x 'gate_soft' ({self.gate_soft * self.gate_linear_speed}"
-                f" m/s) must be at least alpha x F_op ({self.alpha * self.F_op} m/s), the fastest adaptation"
+                f" m/s) must be at least alpha x F_op ({self.alpha * self.F_op} m/s), the fastest adaptation",
+                "adaptive_rcm.gate_linear_speed",
             )
 
 
 @dataclass(frozen=True)
 class ViscousConfig:
-    k_t: float = _positive(default=150.0)
-    k_f: float = _positive(default=150.0)  # N s/m; the paper prints 2 (README, "damping")
-    k_t_unguided: float = _positive(default=2.0)  # N m s, k_t while no hand grips the handle (tracking alone)
+    # below the lower bounds a 10 N push asks for > 100 m/s (or rad/s): only the limits would hold it
+    k_t: float = _range("[0.1, 10000]", 150.0, "N m s, angular damping")
+    k_f: float = _range("[0.1, 10000]", 150.0, "N s/m; the paper prints 2 (README, 'damping')")
+    k_t_unguided: float = _range("[0.1, 10000]", 2.0, "N m s, k_t while no hand grips the handle")
 
 
 @dataclass(frozen=True)
 class MotionConfig:
     integrator: Literal["semi_implicit", "explicit"] = "semi_implicit"
-    self_motion_damping: float = _nonnegative(default=10.0)
+    self_motion_damping: float = _range("[0, 1000]", 10.0, "1/s, mass-proportional damping of self-motion")
     rcm_task: Literal["lateral", "printed"] = "lateral"
-    joint_limit_zone: float = _nonnegative(default=0.3)  # rad inside each joint limit where self-motion pushes away
-    joint_limit_stiffness: float = _nonnegative(default=5.0)  # N m/rad of that push (0: off)
-    stop_time: float = _positive(default=0.1)  # s, time constant of the null-space brake when the RCM cannot be kept
+    joint_limit_zone: float = _range("[0, 1]", 0.3, "rad inside each joint limit where self-motion pushes away")
+    joint_limit_stiffness: float = _range("[0, 1000]", 5.0, "N m/rad of that push (0: off)")
+    stop_time: float = _range("[0.005, 10]", 0.1, "s, null-space brake time constant (at least 5 ticks)")
 
 
 @dataclass(frozen=True)
@@ -152,31 +207,56 @@ class EnvelopeConfig:
     """
 
     enabled: bool = True
-    pivot_speed_max: float = _positive(default=0.5)  # rad/s, angular speed of the shaft about p_R
-    pivot_deceleration: float = _positive(default=4.0)  # rad/s^2
-    insertion_speed_max: float = _positive(default=0.05)  # m/s along the shaft
-    insertion_deceleration: float = _positive(default=0.5)  # m/s^2
-    depth_min: float = _positive(default=0.03)  # m of scope beyond p_R
-    depth_max: float = _positive(default=0.12)  # m of scope beyond p_R
-    roll_range: float = _positive(default=1.5708)  # rad, |roll| about the shaft from the start pose
-    roll_speed_max: float = _positive(default=1.0)  # rad/s
+    pivot_speed_max: float = _range("(0, 10]", 0.5, "rad/s, angular speed of the shaft about p_R")
+    pivot_deceleration: float = _range("(0, 100]", 4.0, "rad/s^2")
+    insertion_speed_max: float = _range("(0, 2]", 0.05, "m/s along the shaft")
+    insertion_deceleration: float = _range("(0, 50]", 0.5, "m/s^2")
+    depth_min: float = _range("(0, 0.6)", 0.03, "m of scope beyond p_R, shorter than scope.length")
+    depth_max: float = _range("(0, 0.6)", 0.12, "m of scope beyond p_R, shorter than scope.length")
+    roll_range: float = _range("(0, pi]", 1.5708, "rad, |roll| about the shaft from the start pose")
+    roll_speed_max: float = _range("(0, 10]", 1.0, "rad/s")
 
 
 @dataclass(frozen=True)
 class SafetyConfig:
     """Bounds the safety supervisor checks on *measured* state; each one holds the arm with an alarm."""
 
-    max_rcm_error: float = _positive(default=0.005)  # m, p_R to the scope axis at the measured joints
-    depth_tolerance: float = _nonnegative(default=0.005)  # m beyond the envelope's depth range
-    max_residual_force: float = _positive(default=20.0)  # N, |ΔF| (eq 19): the scope's force on the wall
-    residual_force_time: float = _nonnegative(default=0.05)  # s |ΔF| must stay over its bound (estimate lag)
+    max_rcm_error: float = _range("(0, 0.1]", 0.005, "m, p_R to the scope axis at the measured joints")
+    depth_tolerance: float = _range("[0, 0.1]", 0.005, "m beyond the envelope's depth range")
+    max_residual_force: float = _range("(0, 500]", 20.0, "N, |ΔF| (eq 19): the scope's force on the wall")
+    residual_force_time: float = _range("[0, 10]", 0.05, "s |ΔF| must stay over its bound (estimate lag)")
 
 
 @dataclass(frozen=True)
 class InputsConfig:
-    max_rcm_error: float = _positive(default=0.02)
-    max_image_age: float = _positive(default=0.2)
-    max_instruments: int = _positive(default=8)  # more detections in one frame are a detector fault: none used
+    max_rcm_error: float = _range("(0, 0.1]", 0.02, "m; larger errors are reported by the controller")
+    max_image_age: float = _range("(0, 10]", 0.2, "s; older instrument detections count as none")
+    max_instruments: int = _range("[1, 64]", 8, "more detections in one frame are a detector fault: none used")
+
+
+_HEX = re.compile(r"^[0-9A-Fa-f]{2}(?: ?[0-9A-Fa-f]{2}){0,7}$")  # what bytes.fromhex reads, 1-8 bytes
+
+
+@dataclass(frozen=True)
+class TactileConfig:
+    """Wire format of the tactile handle's serial frames (:class:`lapwrench.drivers.tactile.TactileFrameFormat`).
+
+    ``header`` is hex text (``"AA55"``: bytes AA 55), 1 to 8 bytes. ``checksum`` covers the
+    length byte and payload, plus the header if ``checksum_includes_header``.
+    """
+
+    header: str = "AA55"
+    checksum: TactileChecksum = "none"
+    length_byte: bool = False
+    checksum_includes_header: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.header, str) or _HEX.match(self.header) is None:
+            raise ConfigError(
+                "config key 'tactile.header' must be 1 to 8 bytes as hex text such as 'AA55', "
+                f"got {short(self.header)}",
+                "tactile.header",
+            )
 
 
 @dataclass(frozen=True)
@@ -193,53 +273,70 @@ class Config:
     inputs: InputsConfig = field(default_factory=InputsConfig)
     envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    tactile: TactileConfig = field(default_factory=TactileConfig)
 
     def replace(self, **sections: dict[str, Any]) -> Config:
         """A copy with some values changed, e.g. ``cfg.replace(tracking={"ramp": "c1"})``; validated."""
         data = to_dict(self)
         for section, values in sections.items():
             if section not in data:
-                raise ConfigError(f"unknown config section '{section}'")
+                raise ConfigError(f"unknown config section {short(section)}", section)
+            if not isinstance(values, dict):
+                raise ConfigError(f"config section '{section}' must be a mapping, got {type(values).__name__}", section)
             data[section].update(values)
         return from_dict(data)
 
 
-def _check_value(key: str, value: Any, annotation: Any, check: str | None) -> Any:
+def _number(key: str, value: Any, annotation: Any) -> int | float:
+    """``value`` as the int or (finite) float the field's annotation asks for."""
+    if annotation is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"config key '{key}' must be an integer, got {short(value)}", key)
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"config key '{key}' must be a number, got {short(value)}", key)
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond ~1.8e308
+        raise ConfigError(f"config key '{key}' is too large, got {short(value)}", key) from None
+    if not math.isfinite(number):
+        raise ConfigError(f"config key '{key}' must be finite, got {short(value)}", key)
+    return number
+
+
+def _check_value(key: str, value: Any, annotation: Any, bounds: Range | None) -> Any:
     origin = typing.get_origin(annotation)
     if origin is Literal:
         allowed = typing.get_args(annotation)
-        if value not in allowed:
-            raise ConfigError(f"config key '{key}' must be one of {list(allowed)}, got {value!r}")
+        if not isinstance(value, str | bool | int | float) or value not in allowed:
+            raise ConfigError(f"config key '{key}' must be one of {list(allowed)}, got {short(value)}", key)
         return value
     if annotation is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"config key '{key}' must be true or false, got {value!r}")
+            raise ConfigError(f"config key '{key}' must be true or false, got {short(value)}", key)
         return value
-    if annotation is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{key}' must be an integer, got {value!r}")
-    elif annotation is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"config key '{key}' must be a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ConfigError(f"config key '{key}' must be finite, got {value!r}")
-    if check == "positive" and not value > 0:
-        raise ConfigError(f"config key '{key}' must be positive, got {value!r}")
-    if check == "nonnegative" and not value >= 0:
-        raise ConfigError(f"config key '{key}' must be non-negative, got {value!r}")
+    if annotation is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"config key '{key}' must be text, got {short(value)}", key)
+        return value
+    value = _number(key, value, annotation)
+    if bounds is not None and value not in bounds:
+        why = f" ({bounds.why})" if bounds.why else ""
+        raise ConfigError(f"config key '{key}' must lie in {bounds}{why}, got {short(value)}", key)
     return value
 
 
 def _build(cls: type, data: Any, prefix: str) -> Any:
     if not isinstance(data, dict):
-        raise ConfigError(f"config section '{prefix or 'root'}' must be a mapping, got {type(data).__name__}")
+        raise ConfigError(
+            f"config section '{prefix or 'root'}' must be a mapping, got {type(data).__name__}", prefix or None
+        )
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     for key in data:
         if key not in fields:
             where = f"{prefix}.{key}" if prefix else str(key)
-            raise ConfigError(f"unknown config key '{where}'; known keys here: {sorted(fields)}")
+            raise ConfigError(f"unknown config key {short(where)}; known keys here: {sorted(fields)}", where)
     kwargs = {}
     for name, f in fields.items():
         key = f"{prefix}.{name}" if prefix else name
@@ -249,38 +346,31 @@ def _build(cls: type, data: Any, prefix: str) -> Any:
         if dataclasses.is_dataclass(annotation):
             kwargs[name] = _build(annotation, data[name], key)
         else:
-            kwargs[name] = _check_value(key, data[name], annotation, f.metadata.get("check"))
+            kwargs[name] = _check_value(key, data[name], annotation, f.metadata.get("range"))
     return cls(**kwargs)
 
 
+def _require(ok: bool, key: str, message: str) -> None:
+    if not ok:
+        raise ConfigError(f"config key '{key}' {message}", key)
+
+
 def _check_consistency(cfg: Config) -> None:
-    if cfg.tracking.epsilon2 <= cfg.tracking.epsilon1:
-        raise ConfigError(
-            f"config key 'tracking.epsilon2' ({cfg.tracking.epsilon2}) must exceed "
-            f"'tracking.epsilon1' ({cfg.tracking.epsilon1})"
-        )
-    if cfg.adaptive_rcm.gamma2 <= cfg.adaptive_rcm.gamma1:
-        raise ConfigError(
-            f"config key 'adaptive_rcm.gamma2' ({cfg.adaptive_rcm.gamma2}) must exceed "
-            f"'adaptive_rcm.gamma1' ({cfg.adaptive_rcm.gamma1})"
-        )
-    if not cfg.scope.lambda0 < 1.0:
-        raise ConfigError(f"config key 'scope.lambda0' must lie in (0, 1), got {cfg.scope.lambda0}")
-    if not cfg.scope.handle_offset < cfg.scope.length:
-        raise ConfigError("config key 'scope.handle_offset' must be shorter than 'scope.length'")
-    if not cfg.scope.oblique_angle_deg < 90.0:
-        raise ConfigError("config key 'scope.oblique_angle_deg' must be below 90")
-    env = cfg.envelope
-    if not env.depth_min < env.depth_max:
-        raise ConfigError(
-            f"config key 'envelope.depth_max' ({env.depth_max}) must exceed 'envelope.depth_min' ({env.depth_min})"
-        )
-    if not env.depth_max < cfg.scope.length:
-        raise ConfigError("config key 'envelope.depth_max' must be shorter than 'scope.length'")
-    if not env.roll_range <= math.pi:
-        raise ConfigError(f"config key 'envelope.roll_range' must lie in (0, pi], got {env.roll_range}")
-    if not cfg.robot.limit_fraction <= 1.0:
-        raise ConfigError(f"config key 'robot.limit_fraction' must lie in (0, 1], got {cfg.robot.limit_fraction}")
+    """Checks between keys (each key's own range is checked as it is read)."""
+    t, a, s, c, env = cfg.tracking, cfg.adaptive_rcm, cfg.scope, cfg.camera, cfg.envelope
+    _require(
+        t.epsilon2 > t.epsilon1, "tracking.epsilon2", f"({t.epsilon2}) must exceed 'tracking.epsilon1' ({t.epsilon1})"
+    )
+    diagonal = math.hypot(c.width, c.height)
+    _require(t.epsilon1 < diagonal, "tracking.epsilon1", f"({t.epsilon1} px) must be below the image diagonal "
+             f"({diagonal:.0f} px), or no instrument ever leaves the dead zone")
+    _require(a.gamma2 > a.gamma1, "adaptive_rcm.gamma2", f"({a.gamma2}) must exceed 'adaptive_rcm.gamma1' ({a.gamma1})")
+    _require(c.u0 < c.width, "camera.u0", f"({c.u0}) must lie inside the image width (0, {c.width})")
+    _require(c.v0 < c.height, "camera.v0", f"({c.v0}) must lie inside the image height (0, {c.height})")
+    _require(s.handle_offset < s.length, "scope.handle_offset", "must be shorter than 'scope.length'")
+    _require(env.depth_min < env.depth_max, "envelope.depth_max",
+             f"({env.depth_max}) must exceed 'envelope.depth_min' ({env.depth_min})")
+    _require(env.depth_max < s.length, "envelope.depth_max", "must be shorter than 'scope.length'")
 
 
 def ensure_writable_dir(path: str | Path) -> Path:
@@ -310,35 +400,47 @@ def presets() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+def _resolve(path: str | Path) -> Path:
+    """The file behind a config argument: the path itself, or the packaged preset of that name."""
+    p = Path(path)
+    try:
+        exists = p.exists()
+    except (OSError, ValueError):  # e.g. an embedded NUL or a name too long
+        exists = False
+    if not exists and str(path) in presets():
+        return Path(str(resources.files("lapwrench").joinpath(f"data/presets/{path}.yaml")))
+    if not exists:
+        raise ConfigError(f"config file not found: {config_yaml.cut(str(path), 100)} (presets: {', '.join(presets())})")
+    return p
+
+
 def load(path: str | Path | None = None) -> Config:
     """Load a YAML configuration file or a packaged preset name; ``None`` gives the defaults.
 
-    Keys missing from the file keep their defaults (the paper's parameters).
+    Keys missing from the file keep their defaults (the paper's parameters). Every problem is a
+    :class:`ConfigError` whose message names the file (and the line, when there is one).
     """
     if path is None:
-        text = resources.files("lapwrench").joinpath("data/default.yaml").read_text()
-        source = "default.yaml"
+        p, source = Path(str(resources.files("lapwrench").joinpath("data/default.yaml"))), "default.yaml"
     else:
-        p = Path(path)
-        if not p.is_file() and str(path) in presets():
-            p = Path(str(resources.files("lapwrench").joinpath(f"data/presets/{path}.yaml")))
-        if not p.is_file():
-            raise ConfigError(f"config file not found: {path} (presets: {', '.join(presets())})")
-        text = p.read_text()
-        source = str(path)
+        p, source = _resolve(path), config_yaml.cut(str(path), 100)
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{source} is not valid YAML: {exc}") from exc
+        text = config_yaml.read_text(p, source)
+    except config_yaml.YamlConfigError as exc:
+        raise ConfigError(str(exc)) from exc
+    try:
+        data, lines = config_yaml.parse(text)
+    except config_yaml.YamlConfigError as exc:
+        raise ConfigError(f"{source} {exc}") from exc
     if data is None:
         data = {}
     try:
         return from_dict(data)
     except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from exc
+        line = lines.get(exc.key) if exc.key else None
+        where = f"{source} line {line}" if line else source
+        raise ConfigError(f"{where}: {exc}", exc.key) from exc
 
 
 def dump(cfg: Config, path: str | Path) -> None:
     Path(path).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
-
-
