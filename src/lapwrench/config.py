@@ -128,6 +128,8 @@ class TrackingConfig:
     epsilon1: float = _range("(0, 12000)", 50.0, "pixels, inside the image diagonal")
     epsilon2: float = _range("(0, 12000]", 200.0, "pixels, beyond epsilon1")
     F_max: float = _range("(0, 50]", 10.0, "N, about what a hand pushes a scope with")
+    # eq 8 sums over the detections: the sum is capped, so the force never grows with their number
+    F_sum_max: float = _range("(0, 100]", 20.0, "N, cap on the summed tracking force (two ports: 2 x F_max)")
     ramp: Ramp = "printed"
     direction: Literal["printed", "image_plane"] = "image_plane"
 
@@ -362,6 +364,8 @@ def _check_consistency(cfg: Config) -> None:
         t.epsilon2 > t.epsilon1, "tracking.epsilon2", f"({t.epsilon2}) must exceed 'tracking.epsilon1' ({t.epsilon1})"
     )
     diagonal = math.hypot(c.width, c.height)
+    _require(t.F_sum_max >= t.F_max, "tracking.F_sum_max", f"({t.F_sum_max}) must be at least 'tracking.F_max' "
+             f"({t.F_max}): one instrument alone must reach F_max")
     _require(t.epsilon1 < diagonal, "tracking.epsilon1", f"({t.epsilon1} px) must be below the image diagonal "
              f"({diagonal:.0f} px), or no instrument ever leaves the dead zone")
     _require(a.gamma2 > a.gamma1, "adaptive_rcm.gamma2", f"({a.gamma2}) must exceed 'adaptive_rcm.gamma1' ({a.gamma1})")

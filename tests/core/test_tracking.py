@@ -65,3 +65,21 @@ def test_virtual_force_sums_instruments_and_saturates() -> None:
     both = virtual_force(np.vstack([far_right, far_left]), TrackingParams.from_config(CAM, printed), R_C)
     assert abs(both[0]) < 1e-9  # lateral parts cancel, the printed retraction parts add
     assert both[2] < 0
+
+
+@pytest.mark.parametrize("n", [2, 3, 100, 1000])
+def test_the_summed_force_is_capped_whatever_the_number_of_detections(n: int) -> None:
+    """Eq 8 sums over the detections: without the cap, 100 boxes at one corner asked 1000 N."""
+    corner = np.tile([[CAM.width - 1.0, CAM.height - 1.0]], (n, 1))
+    F = virtual_force(corner, PARAMS, np.eye(3))
+    single = virtual_force(corner[:1], PARAMS, np.eye(3))
+    expected = min(n * CFG.tracking.F_max, CFG.tracking.F_sum_max)
+    assert np.linalg.norm(F) == pytest.approx(expected)
+    np.testing.assert_allclose(F / np.linalg.norm(F), single / np.linalg.norm(single))  # direction kept
+
+
+def test_the_cap_must_let_one_instrument_reach_F_max() -> None:
+    from lapwrench.config import ConfigError
+
+    with pytest.raises(ConfigError, match="F_sum_max"):
+        CFG.replace(tracking={"F_sum_max": 5.0})

@@ -24,6 +24,7 @@ class TrackingParams(NamedTuple):
     epsilon1: float
     epsilon2: float
     F_max: float
+    F_sum_max: float
     ramp: str
     direction: str
 
@@ -31,7 +32,8 @@ class TrackingParams(NamedTuple):
     def from_config(camera: CameraConfig, cfg: TrackingConfig) -> TrackingParams:
         return TrackingParams(
             float(camera.fx), float(camera.fy), float(camera.u0), float(camera.v0),
-            float(cfg.epsilon1), float(cfg.epsilon2), float(cfg.F_max), cfg.ramp, cfg.direction,
+            float(cfg.epsilon1), float(cfg.epsilon2), float(cfg.F_max), float(cfg.F_sum_max), cfg.ramp,
+            cfg.direction,
         )
 
 
@@ -74,7 +76,9 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
 
 @kernel
 def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
-    """Eq (8), force part: F_c = Σ F_v(d_i) V_i over the n_s detected instruments (0 if n_s = 0)."""
+    """Eq (8), force part: F_c = Σ F_v(d_i) V_i over the n_s detected instruments (0 if n_s = 0),
+    scaled down to |F_c| <= F_sum_max when the sum exceeds it (a departure from the printed eq 8: the
+    sum would otherwise grow with the number of boxes a detector returns; its direction is kept)."""
     F = np.zeros(3)
     z_C = np.ascontiguousarray(R_C[:, 2])
     for i in range(points.shape[0]):
@@ -82,7 +86,8 @@ def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
         mag = tracking_force_magnitude(pixel_distance(u, v, p.u0, p.v0), p)
         if mag > 0.0:
             F += mag * tracking_direction(unit_depth_ray(u, v, p, R_C), z_C, p.direction)
-    return F
+    norm = math.sqrt(F @ F)
+    return F * (p.F_sum_max / norm) if norm > p.F_sum_max else F
 
 
 class TrackingWrench:
