@@ -5,7 +5,7 @@ Usage::
     MUJOCO_GL=egl python bench/detect.py [--frames 100] [--threads 2] [--onnx MODEL.onnx]
                                          [--data out/datasets/instruments] [--test-images 100] [--pt best.pt]
 
-The held-out test split is the simulator's (lapwrench.perception.dataset): if ``--data`` does not
+The held-out test split is the simulator's (lapwrench.sim.dataset): if ``--data`` does not
 hold a test split generated with ``--seed``/``--test-images``, the bench renders one (seed 0 and
 100 images by default; about 15 s). With the same seed, its images are the first images of the
 training dataset's test split (each image's randomness depends only on seed, split and index),
@@ -64,9 +64,10 @@ from lapwrench.perception import (
     UltralyticsDetector,
 )
 from lapwrench.perception.boxes import box_iou
-from lapwrench.perception.dataset import DatasetConfig, dataset_matches, generate_dataset
+from lapwrench.perception.dataset import DatasetConfig, dataset_matches
 from lapwrench.perception.evaluate import evaluate_detector, read_yolo_split
 from lapwrench.perception.synthetic import draw_instrument_scene, make_tiny_conv_yolo_onnx
+from lapwrench.sim.dataset import generate_dataset
 
 W, H = 640, 480
 ROOT = Path(__file__).resolve().parent.parent

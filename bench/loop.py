@@ -77,13 +77,13 @@ def longest_run(mask: np.ndarray) -> int:
 
 
 def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
+    from lapwrench.buffer import LatestValue
     from lapwrench.config import load
-    from lapwrench.drivers.buffer import LatestValue
     from lapwrench.drivers.tactile import TactileFrame
     from lapwrench.hardware.cli import FakeFTProcess
     from lapwrench.hardware.frankysim import FrankySimServer
     from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec, franka_factory
-    from lapwrench.hardware.supervisor import SupervisorConfig
+    from lapwrench.safety.supervisor import SupervisorConfig
     from lapwrench.virtual import DEFAULT_Q0
 
     cfg = load().replace(robot={"kind": "fr3"})

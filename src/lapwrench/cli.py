@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -12,20 +13,29 @@ from pathlib import Path
 import numpy as np
 
 from lapwrench import config as config_mod
+from lapwrench.cli_types import ArgumentParser, float_in, int_in, output_dir
+
+MIN_VIRTUAL_SECONDS = 0.1  # enough ticks for the metrics and the plot
+MAX_VIRTUAL_SECONDS = 3600.0  # the virtual run keeps every tick in memory
+MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits
+
+
+class UsageError(Exception):
+    """A bad argument or input file: ``lapwrench <command>: <message>`` and exit code 2."""
 
 
 def _writable_dir(path: Path) -> Path:
     try:
         return config_mod.ensure_writable_dir(path)
     except OSError as exc:
-        raise SystemExit(f"lapwrench: report folder {path} is not writable: {exc}") from exc
+        raise UsageError(f"report folder {path} is not writable: {exc.strerror or exc}") from exc
 
 
 def _load_config(path: str | None) -> config_mod.Config:
     try:
         return config_mod.load(path)
     except config_mod.ConfigError as exc:
-        raise SystemExit(f"lapwrench: {exc}") from exc
+        raise UsageError(str(exc)) from exc
 
 
 def cmd_virtual(args: argparse.Namespace) -> int:
@@ -57,6 +67,10 @@ def cmd_virtual(args: argparse.Namespace) -> int:
         return 2.0 if 3.5 <= t < 8.5 else (1.1 if 11.5 <= t < 15.5 else 0.0)
 
     duration = args.duration
+    if not (math.isfinite(duration) and MIN_VIRTUAL_SECONDS <= duration <= MAX_VIRTUAL_SECONDS):
+        raise UsageError(
+            f"--duration must be a number of seconds from {MIN_VIRTUAL_SECONDS:g} to {MAX_VIRTUAL_SECONDS:g}"
+        )
     steps = round(duration / cfg.robot.dt)
     bar = tqdm(total=steps, desc="virtual closed loop", unit="tick", mininterval=0.5, disable=args.quiet)
     t0 = time.perf_counter()
@@ -112,12 +126,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
             detector=args.detector,
             workers=args.workers,
         )
+    except DemoError as exc:  # a bad argument or input file, found before anything ran
+        raise UsageError(str(exc)) from exc
+    try:
         results = run_demo(plan, progress=not args.quiet)
-    except DemoError as exc:
-        print(f"lapwrench: {exc}", file=sys.stderr)
+    except DemoError as exc:  # a run that failed (FAILED.txt says why)
+        print(f"lapwrench demo: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("lapwrench: demo interrupted; no report was written", file=sys.stderr)
+        print("lapwrench demo: interrupted; no report was written", file=sys.stderr)
         return 130
     for name, res in results.items():
         print(f"{name}: " + ", ".join(f"{r.label}: RCM max {r.metrics['rcm_error_max_mm']:.2f} mm" for r in res.runs))
@@ -126,11 +143,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="lapwrench", description="Laparoscope-holding robot control (unified wrenches).")
+    p = ArgumentParser(prog="lapwrench", description="Laparoscope-holding robot control (unified wrenches).")
     sub = p.add_subparsers(dest="command", required=True)
 
     demo = sub.add_parser("demo", help="the main job: the paper's experiments in simulation, written to a report")
-    demo.add_argument("--out", default="reports/latest", help="report folder (default reports/latest)")
+    demo.add_argument(
+        "--out", type=output_dir, default="reports/latest", help="report folder (default reports/latest)"
+    )
     demo.add_argument(
         "--scenarios",
         nargs="+",
@@ -139,8 +158,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--config", help="YAML configuration or preset for every scenario (default: the paper's)")
     demo.add_argument("--tracking-config", help="configuration for needle-search and workflow")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--time-scale", type=float, default=1.0, help="shorten the scenarios (0.05-1)")
+    demo.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="random seed (0 to 2^32-1; default 0)")
+    demo.add_argument(
+        "--time-scale", type=float_in(0.05, 1.0), default=1.0, help="shorten the scenarios (0.05-1; default 1)"
+    )
     demo.add_argument("--no-video", action="store_true", help="skip the MP4s")
     demo.add_argument(
         "--detector",
@@ -149,15 +170,21 @@ def build_parser() -> argparse.ArgumentParser:
         "model, or projected (simulator geometry, no detector)",
     )
     demo.add_argument(
-        "--workers", type=int, default=None,
-        help="processes running scenarios side by side (default: the CPU count, at most 4; 1: in this process)",
+        "--workers", type=int_in(1, 64), default=None,
+        help="processes running scenarios side by side, 1 to 64 (default: the CPU count, at most 4; 1: in this"
+        " process)",
     )
     demo.add_argument("--quiet", action="store_true", help="no progress bar")
 
     virt = sub.add_parser("virtual", help="closed loop on the controller's own virtual dynamics (no physics)")
     virt.add_argument("--config", help="YAML configuration or preset (default: the paper's parameters)")
-    virt.add_argument("--out", default="reports/virtual", help="report folder")
-    virt.add_argument("--duration", type=float, default=20.0, help="seconds of robot time")
+    virt.add_argument("--out", type=output_dir, default="reports/virtual", help="report folder")
+    virt.add_argument(
+        "--duration",
+        type=float_in(MIN_VIRTUAL_SECONDS, MAX_VIRTUAL_SECONDS),
+        default=20.0,
+        help=f"seconds of robot time, {MIN_VIRTUAL_SECONDS:g} to {MAX_VIRTUAL_SECONDS:g} (default 20)",
+    )
     virt.add_argument("--quiet", action="store_true", help="no progress bar")
     from lapwrench.hardware import cli as hardware_cli
 
@@ -197,9 +224,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Parse and run one command. Bad arguments and input files end with one line on stderr and exit
+    code 2 (argparse's own errors add a usage line); never a traceback."""
+    # OpenCV's own warnings (a camera index that does not open...) would add lines to our one-line errors
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
     args = build_parser().parse_args(argv)
-    if args.command == "demo":
-        return cmd_demo(args)
-    if args.command == "virtual":
-        return cmd_virtual(args)
-    return int(args.func(args))
+    try:
+        if args.command == "demo":
+            return cmd_demo(args)
+        if args.command == "virtual":
+            return cmd_virtual(args)
+        return int(args.func(args))
+    except (UsageError, config_mod.ConfigError) as exc:
+        print(f"lapwrench {args.command}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

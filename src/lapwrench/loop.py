@@ -3,7 +3,7 @@
 The same loop drives the controller's virtual model (:class:`lapwrench.virtual.VirtualRobot`), the
 MuJoCo world (:class:`lapwrench.sim.robot.SimRobot`) and the Franka
 (:class:`lapwrench.hardware.franka.FrankaRobot`); what differs lives behind the
-:class:`~lapwrench.robot.interface.RobotInterface` and the :class:`~lapwrench.sources.Source` s.
+:class:`~lapwrench.robot_interface.RobotInterface` and the :class:`~lapwrench.sources.Source` s.
 
 One cycle (:meth:`ControlLoop.cycle`)::
 
@@ -14,7 +14,7 @@ One cycle (:meth:`ControlLoop.cycle`)::
     q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
     robot.command(q)
 
-The supervisor watches measured state only (:mod:`lapwrench.hardware.supervisor`).
+The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`).
 
 Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is
 ``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
@@ -38,8 +38,9 @@ from typing import Any, Literal
 import numpy as np
 
 from lapwrench.controller import Controller, TickResult
-from lapwrench.hardware.supervisor import MeasuredScope, SafetySupervisor, SupervisorEvent, measure_scope
-from lapwrench.robot.interface import RobotError, RobotInterface
+from lapwrench.robot.errors import RobotError
+from lapwrench.robot_interface import RobotInterface
+from lapwrench.safety.supervisor import MeasuredScope, SafetySupervisor, SupervisorEvent, measure_scope
 from lapwrench.sensors import RobotReading, SensorFrame
 from lapwrench.sources import Source, fresh
 from lapwrench.spatial import Vec
@@ -125,7 +126,7 @@ class ControlLoop:
     """Runs the controller on a robot at its control rate (module docstring).
 
     Args:
-        robot: A :class:`~lapwrench.robot.interface.RobotInterface`.
+        robot: A :class:`~lapwrench.robot_interface.RobotInterface`.
         controller: The controller (reset by :meth:`start` at the robot's measured pose).
         supervisor: The safety supervisor every command passes through.
         sources: The controller's inputs (:class:`~lapwrench.sources.Source`), at most one per kind.

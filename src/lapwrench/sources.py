@@ -13,7 +13,7 @@ comes from a :class:`Source` of the same shape, whatever produces it:
 Simulated sources are :class:`Observable` s, after dm_control's observables: a ``read(t)`` of the
 world every ``update_interval`` seconds, which arrives ``delay`` seconds later, through an optional
 ``corruptor`` (noise, bias, dropout). Hardware sources are :class:`BufferSource` s over a driver's
-:class:`~lapwrench.drivers.buffer.LatestValue`.
+:class:`~lapwrench.buffer.LatestValue`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, TactileReading
 
 R = TypeVar("R", ForceTorqueReading, TactileReading, InstrumentObservation)

@@ -61,6 +61,3 @@ class Wrench:
     def about(self, point: Vec) -> Vec:
         """The 6-vector of the same wrench taken about ``point`` (eq 39)."""
         return wrench_transform(self.point, point) @ self.vector
-
-    def is_zero(self) -> bool:
-        return not (np.any(self.moment) or np.any(self.force))

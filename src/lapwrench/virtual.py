@@ -15,10 +15,10 @@ import numpy as np
 
 from lapwrench.config import CameraConfig, Config
 from lapwrench.controller import Controller, TickResult
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.loop import ControlLoop
 from lapwrench.robot.description import RobotKind
 from lapwrench.robot.limits import limit_usage
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading
 from lapwrench.sources import Observable, Source
 from lapwrench.spatial import Mat, Vec
@@ -70,7 +70,7 @@ class VirtualLog:
 class VirtualRobot:
     """The controller's virtual model as the robot: it is exactly where it was commanded.
 
-    A :class:`~lapwrench.robot.interface.RobotInterface`: ``read`` returns the last command as the
+    A :class:`~lapwrench.robot_interface.RobotInterface`: ``read`` returns the last command as the
     measured position, its difference over one period as the velocity, and no force estimate.
     """
 

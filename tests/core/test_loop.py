@@ -10,8 +10,8 @@ import pytest
 from lapwrench.config import load
 from lapwrench.controller import Controller
 from lapwrench.hardware.runner import ControlLoop as HardwareLoop
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.loop import ControlLoop
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, TactileReading
 from lapwrench.sources import Observable
 from lapwrench.virtual import DEFAULT_Q0, VirtualRobot, tactile_for_delta

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation
 from lapwrench.sources import BufferSource, Observable, fresh, ft_reading
 

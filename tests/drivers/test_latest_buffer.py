@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from lapwrench.drivers.buffer import LatestValue, RateMonitor, Sample
+from lapwrench.buffer import LatestValue, RateMonitor, Sample
 
 
 def test_empty_buffer_is_stale() -> None:

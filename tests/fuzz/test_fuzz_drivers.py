@@ -18,8 +18,8 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from lapwrench.buffer import RateMonitor
 from lapwrench.drivers.base import DeviceOpenError, EndOfStream, PacketError
-from lapwrench.drivers.buffer import RateMonitor
 from lapwrench.drivers.camera import Camera, to_rgb
 from lapwrench.drivers.ft import (
     RECORD_SIZE,

@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 
+from lapwrench.buffer import LatestValue
 from lapwrench.config import Config
 from lapwrench.controller import Controller
-from lapwrench.drivers.buffer import LatestValue
 from lapwrench.drivers.ft import Wrench
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.frankysim import frankysim_available
 from lapwrench.hardware.runner import ControlLoop, Sources
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 
 FRANKYSIM_MISSING = frankysim_available()
 

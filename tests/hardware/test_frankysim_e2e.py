@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from hardware.support import MemoryLogger, QdProbe, rt_process, rt_spec
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.drivers.fakes import FakeFTDevice
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory

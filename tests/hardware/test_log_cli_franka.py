@@ -14,14 +14,15 @@ import numpy as np
 import pytest
 from hardware.support import FRANKYSIM_MISSING, build_loop
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.drivers.ft import Wrench
 from lapwrench.hardware import cli as hw
 from lapwrench.hardware.franka import CollisionThresholds, FrankaRobot, Payload, map_external_force
 from lapwrench.hardware.log import CYCLE_TOPIC, EVENT_TOPIC, CycleRecord, RunLogger, iter_messages, read_log
 from lapwrench.hardware.runner import Sources
 from lapwrench.robot.description import ScopeGeometry
-from lapwrench.robot.interface import RobotError, RobotInterface
+from lapwrench.robot.errors import RobotError
+from lapwrench.robot_interface import RobotInterface
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 
 

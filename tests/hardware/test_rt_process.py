@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from hardware.support import MemoryLogger, feeder_main, rt_process, rt_spec
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.rt import RtOptions, RtProcess, RtProcessError, apply_realtime
 from lapwrench.robot.limits import limit_usage

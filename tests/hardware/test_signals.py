@@ -28,9 +28,9 @@ import pytest
 from lapwrench.config import load
 from lapwrench.hardware.log import load_log, log_report_main
 from lapwrench.hardware.run_common import RunInterrupted, StopSignals
-from lapwrench.hardware.supervisor import SupervisorConfig
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
+from lapwrench.safety.supervisor import SupervisorConfig
 
 # the real command line (lapwrench.cli.main), as the console script runs it
 CLI = [sys.executable, "-c", "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))"]

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from lapwrench.config import load
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState, measure_scope
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState, measure_scope
 from lapwrench.virtual import DEFAULT_Q0
 
 DT = 1e-3

@@ -86,7 +86,11 @@ def test_dataset_main_tiny(tmp_path, capsys):
     assert dataset_main(args) == 0
     assert (tmp_path / "data.yaml").is_file() and len(list((tmp_path / "images" / "test").glob("*.jpg"))) == 1
     assert "data file" in capsys.readouterr().out
-    bad = parse(add_dataset_arguments, ["--out", str(tmp_path), "--splits", "bogus"])
+    with pytest.raises(SystemExit) as info:  # refused as it is parsed (issue 11, item 10)
+        parse(add_dataset_arguments, ["--out", str(tmp_path), "--splits", "bogus"])
+    assert info.value.code == 2
+    bad = parse(add_dataset_arguments, ["--out", str(tmp_path)])
+    bad.splits = "bogus"  # as a program calling dataset_main would pass it
     assert dataset_main(bad) == 2
 
 
@@ -104,3 +108,26 @@ def test_module_main_dispatches(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "calibrate" in capsys.readouterr().out
+
+
+def test_output_paths_and_numbers_are_checked_before_any_work(tmp_path, capsys):
+    """Issue 11 item 10: an output under a plain file (unwritable even as root), a folder given for a file
+    and nonsense numbers end in argparse's one error line (exit 2), not a traceback after the work."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for add, argv in ((add_calibrate_arguments, ["x.png", "--out", str(blocker / "i.yaml")]),
+                      (add_calibrate_arguments, ["x.png", "--out", str(tmp_path)]),
+                      (add_calibrate_arguments, ["x.png", "--square", "nan"]),
+                      (add_calibrate_arguments, ["x.png", "--min-views", "0"]),
+                      (add_dataset_arguments, ["--out", str(blocker / "ds")]),
+                      (add_dataset_arguments, ["--train", "-5"]),
+                      (add_train_arguments, ["--ship", str(blocker / "m.onnx")]),
+                      (add_train_arguments, ["--epochs", "0"])):
+        with pytest.raises(SystemExit) as info:
+            parse(add, argv)
+        assert info.value.code == 2
+    assert "Traceback" not in capsys.readouterr().err
+    # the details file written beside --out is a folder: refused before calibrating
+    (tmp_path / "i.calibration.yaml").mkdir()
+    args = parse(add_calibrate_arguments, ["x.png", "--out", str(tmp_path / "i.yaml")])
+    assert calibrate_main(args) == 2 and "i.calibration.yaml" in capsys.readouterr().err

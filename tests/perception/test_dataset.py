@@ -12,15 +12,10 @@ import pytest
 import yaml
 from helpers import make_renderable_world
 
-from lapwrench.perception.dataset import (
-    DatasetConfig,
-    FrameLabeller,
-    ScopePoser,
-    dataset_matches,
-    generate_dataset,
-    yolo_label_lines,
-)
+from lapwrench.perception.dataset import DatasetConfig, dataset_matches, yolo_label_lines
 from lapwrench.perception.evaluate import read_yolo_labels, read_yolo_split
+from lapwrench.sim.dataset import FrameLabeller, generate_dataset
+from lapwrench.sim.poser import ScopePoser
 
 W, H = 640, 480
 

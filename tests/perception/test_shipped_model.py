@@ -16,8 +16,9 @@ from lapwrench.perception import (
     make_detector,
     shipped_detector,
 )
-from lapwrench.perception.dataset import DatasetConfig, FrameLabeller
+from lapwrench.perception.dataset import DatasetConfig
 from lapwrench.perception.evaluate import evaluate_predictions
+from lapwrench.sim.dataset import FrameLabeller
 
 MODEL = SHIPPED_MODEL
 

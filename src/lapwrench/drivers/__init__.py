@@ -4,7 +4,7 @@ Every source runs a background reader thread and publishes into a non-blocking l
 (:class:`LatestValue`) stamped with ``time.monotonic()``; the 1 kHz control loop only peeks at the
 newest :class:`Sample` and switches a source's wrench off when ``fresh(max_age)`` is False.
 
-* :mod:`~lapwrench.drivers.buffer`: :class:`LatestValue`, :class:`Sample`, :class:`RateMonitor`.
+* :mod:`~lapwrench.buffer` (re-exported here): :class:`LatestValue`, :class:`Sample`, :class:`RateMonitor`.
 * :mod:`~lapwrench.drivers.base`: :class:`StreamingSource` life cycle and the error types.
 * :mod:`~lapwrench.drivers.ft`: OnRobot HEX (compute box, EtherDAQ UDP) and ATI Net F/T (RDT UDP).
 * :mod:`~lapwrench.drivers.tactile`: 64-element tactile array over serial (pyserial).
@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from lapwrench.buffer import LatestValue, RateMonitor, RateStats, Sample
 from lapwrench.drivers.base import (
     DeviceError,
     DeviceOpenError,
@@ -39,7 +40,6 @@ from lapwrench.drivers.base import (
     SourceStatus,
     StreamingSource,
 )
-from lapwrench.drivers.buffer import LatestValue, RateMonitor, RateStats, Sample
 from lapwrench.drivers.ft import (
     AtiNetFTSensor,
     OnRobotHexSensor,

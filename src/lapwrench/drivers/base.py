@@ -15,7 +15,7 @@ A :class:`StreamingSource` owns one device connection and one reader thread. Its
    with a timeout and releases the device. It is idempotent; sources are also context managers.
 
 Consumers never talk to the thread: they read :attr:`StreamingSource.buffer` (a
-:class:`~lapwrench.drivers.buffer.LatestValue`) and decide freshness from the sample timestamp.
+:class:`~lapwrench.buffer.LatestValue`) and decide freshness from the sample timestamp.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Generic, Self, TypeVar
 
-from lapwrench.drivers.buffer import LatestValue, RateMonitor, Sample
+from lapwrench.buffer import LatestValue, RateMonitor, Sample
 
 __all__ = [
     "DeviceError",

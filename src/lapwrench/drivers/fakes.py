@@ -144,15 +144,6 @@ class FakeFTDevice:
         with self._lock:
             self._dup += n
 
-    def wait_streaming(self, timeout: float = 2.0) -> bool:
-        """Wait until at least one record was sent; False on timeout."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.sent > 0:
-                return True
-            time.sleep(0.005)
-        return False
-
     # ----------------------------------------------------------------- thread
     def _handle_request(self, data: bytes, addr: tuple[str, int]) -> None:
         try:

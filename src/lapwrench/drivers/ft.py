@@ -46,7 +46,7 @@ Scaling assumptions (configurable, check them against your device)
 Output
 ------
 Each accepted record is published as a :class:`Wrench` (force (3,) N, torque (3,) N·m, sensor
-frame, bias removed) in a :class:`~lapwrench.drivers.buffer.LatestValue`; the sample timestamp is
+frame, bias removed) in a :class:`~lapwrench.buffer.LatestValue`; the sample timestamp is
 the host ``time.monotonic()`` at reception. Malformed datagrams (wrong length, a request header
 where a record is expected, non-zero status) raise :class:`~lapwrench.drivers.base.PacketError`
 inside the reader thread, where they are counted and reported without stopping the thread.

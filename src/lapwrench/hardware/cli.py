@@ -28,23 +28,52 @@ the simulation applies to the handle at the same time, and a pty carries a simul
 to the real :class:`~lapwrench.drivers.tactile.SerialTactileArray` reader. ``--frankysim`` does the
 same against franky-sim (started here, on 127.0.0.1) through pylibfranka, as an FR3.
 
-Ctrl-C or SIGTERM asks the loop for a clean stop to rest; the log is flushed and closed.
+SIGINT, SIGTERM or SIGHUP asks the loop for a clean stop to rest (a second signal is ignored with
+'please wait'); the summary names the signal (``stop_reason``) and the log is finalized. A signal
+before the loop starts abandons the run with exit code 128 + its number (nothing has moved; see
+:mod:`lapwrench.hardware.run_common`).
 
 This module keeps the arguments and the checks before a run; the devices are opened in
 :mod:`lapwrench.hardware.devices`, and the two run paths are :mod:`lapwrench.hardware.run_rt` (default)
 and :mod:`lapwrench.hardware.run_inprocess` (``--in-process``).
 
-Exit codes: 0 clean run, 1 the supervisor raised an alarm, 2 a device or argument error, 3 a robot
-error (including the real-time process dying or hanging).
+Exit codes: 0 clean run (a requested stop that ends at rest is one), 1 the supervisor raised an
+alarm, 2 a device or argument error, 3 a robot error (including the real-time process dying or
+hanging).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
+from pathlib import Path
+from typing import Any
 
-from lapwrench.hardware.devices import CliError, DryRunScript, FakeFTProcess, parse_camera, parse_ft_url
+from lapwrench.cli_types import (
+    ArgumentParser,
+    cpu_list,
+    float_in,
+    hex_bytes,
+    host_address,
+    int_in,
+    nonnegative_int,
+    output_file,
+    positive_float,
+    quote,
+    writable_file_problem,
+)
+from lapwrench.hardware.devices import (
+    TACTILE_CHECKSUMS,
+    CliError,
+    DryRunScript,
+    FakeFTProcess,
+    parse_camera,
+    parse_ft_url,
+    tactile_format,
+)
+from lapwrench.hardware.franka import probe_command_port
 from lapwrench.hardware.log import add_log_report_arguments, log_report_main
 from lapwrench.hardware.run_inprocess import _run_in_process
 from lapwrench.hardware.run_rt import _run_process
@@ -59,20 +88,42 @@ __all__ = [
     "parse_camera",
     "parse_ft_url",
     "run_main",
+    "tactile_format",
 ]
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``lapwrench run``."""
-    parser.add_argument("--robot-ip", help="Franka address (required unless --dry-run)")
+    """Arguments of ``lapwrench run`` (each value checked as it is parsed: :mod:`lapwrench.cli_types`)."""
+    parser.add_argument("--robot-ip", type=host_address, help="Franka address (required unless --dry-run)")
     parser.add_argument("--ft", help="handle F/T sensor: hex://HOST[:PORT] (OnRobot HEX) or ati://HOST[:PORT]")
     parser.add_argument("--tactile", help="tactile array serial port, e.g. /dev/ttyUSB0 (or a pyserial URL)")
-    parser.add_argument("--tactile-baud", type=int, default=115200, help="tactile serial baud rate")
+    parser.add_argument(
+        "--tactile-baud", type=int_in(1, 100_000_000), default=115200, help="tactile serial baud rate"
+    )
+    parser.add_argument(
+        "--tactile-checksum",
+        choices=TACTILE_CHECKSUMS,
+        default=None,
+        help="tactile frame checksum (default: the config's tactile.checksum)",
+    )
+    parser.add_argument(
+        "--tactile-header",
+        type=hex_bytes,
+        default=None,
+        metavar="HEX",
+        help="tactile frame header bytes in hex, e.g. AA55 (default: the config's tactile.header)",
+    )
     parser.add_argument("--camera", help="laparoscope camera: device index (0), video file or stream URL")
-    parser.add_argument("--detector", default="classical", help="instrument detector: classical, .onnx or .pt")
+    parser.add_argument(
+        "--detector",
+        default=None,
+        help="instrument detector on the --camera frames: classical (default), .onnx or .pt",
+    )
     parser.add_argument("--config", help="YAML configuration (default: the packaged defaults)")
-    parser.add_argument("--duration", type=float, default=None, help="seconds of robot time (default: until Ctrl-C)")
-    parser.add_argument("--log", help="record the run to this MCAP file")
+    parser.add_argument(
+        "--duration", type=positive_float, default=None, help="seconds of robot time (default: until Ctrl-C)"
+    )
+    parser.add_argument("--log", type=output_file, help="record the run to this MCAP file")
     parser.add_argument("--dry-run", action="store_true", help="the full pipeline on the simulated robot")
     parser.add_argument("--realtime", choices=["enforce", "ignore"], default="enforce", help="libfranka realtime")
     parser.add_argument(
@@ -84,34 +135,54 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-external-force", action="store_true", help="ignore the robot's force estimate")
     parser.add_argument(
         "--max-rcm-error",
-        type=float,
+        type=float_in(0.0, 0.1, lo_open=True),
         default=None,
-        help="supervisor bound on the measured RCM error (m; default: the config's safety.max_rcm_error)",
+        help="supervisor bound on the measured RCM error (m, at most 0.1; default: the config's"
+        " safety.max_rcm_error)",
     )
-    parser.add_argument("--cycle-budget-us", type=float, default=800.0, help="compute time per cycle (us)")
-    parser.add_argument("--max-misses", type=int, default=20, help="consecutive deadline misses that stop")
-    parser.add_argument("--ft-max-age", type=float, default=0.02, help="F/T samples older than this are off (s)")
-    parser.add_argument("--tactile-max-age", type=float, default=0.1, help="tactile max age (s)")
-    parser.add_argument("--camera-max-age", type=float, default=0.2, help="instrument detection max age (s)")
+    parser.add_argument(
+        "--cycle-budget-us", type=float_in(0.0, 1e6, lo_open=True), default=800.0, help="compute time per cycle (us)"
+    )
+    parser.add_argument(
+        "--max-misses", type=nonnegative_int, default=20, help="consecutive deadline misses that stop (0: never)"
+    )
+    parser.add_argument(
+        "--ft-max-age", type=positive_float, default=0.02, help="F/T samples older than this are off (s)"
+    )
+    parser.add_argument("--tactile-max-age", type=positive_float, default=0.1, help="tactile max age (s)")
+    parser.add_argument(
+        "--camera-max-age", type=positive_float, default=0.2, help="instrument detection max age (s)"
+    )
     parser.add_argument("--no-tare", action="store_true", help="do not tare the F/T sensor at start")
     parser.add_argument("--frankysim", action="store_true", help="--dry-run against franky-sim (pylibfranka, FR3)")
     parser.add_argument(
         "--in-process", action="store_true", help="debugging: run the loop in this process (threads, shared GIL)"
     )
     parser.add_argument(
-        "--rt-priority", type=int, default=80, help="SCHED_FIFO priority of the loop's process (0: don't ask)"
-    )
-    parser.add_argument("--rt-cpus", default=None, help="pin the loop's process to these CPUs, e.g. '1' or '2,3'")
-    parser.add_argument("--detector-cpus", default=None, help="pin the detector process to these CPUs")
-    parser.add_argument(
-        "--feeder-timeout", type=float, default=0.5, help="heartbeat age (s) of this process that stops the loop"
+        "--rt-priority",
+        type=int_in(0, 99),
+        default=80,
+        help="SCHED_FIFO priority (0-99) of the loop's process (0: don't ask)",
     )
     parser.add_argument(
-        "--detector-timeout", type=float, default=1.0, help="heartbeat age (s) of the detector that stops the loop"
+        "--rt-cpus", type=cpu_list, default=None, help="pin the loop's process to these CPUs, e.g. '1' or '2,3'"
+    )
+    parser.add_argument("--detector-cpus", type=cpu_list, default=None, help="pin the detector process to these CPUs")
+    parser.add_argument(
+        "--feeder-timeout",
+        type=positive_float,
+        default=0.5,
+        help="heartbeat age (s) of this process that stops the loop",
+    )
+    parser.add_argument(
+        "--detector-timeout",
+        type=positive_float,
+        default=1.0,
+        help="heartbeat age (s) of the detector that stops the loop",
     )
     parser.add_argument(
         "--child-timeout",
-        type=float,
+        type=positive_float,
         default=None,
         help="heartbeat age (s) of the loop's process that counts as hung (default 0.5; 5 with a simulated robot,"
         " which may stall on a busy machine)",
@@ -133,20 +204,10 @@ def run_main(args: argparse.Namespace) -> int:
     frankysim = bool(getattr(args, "frankysim", False))
     if frankysim:
         cfg = cfg.replace(robot={"kind": "fr3"})
-    if not (args.dry_run or frankysim) and not args.robot_ip:
-        print("lapwrench run: --robot-ip is required (or use --dry-run / --frankysim)", file=sys.stderr)
-        return 2
-    if args.duration is not None and not args.duration > 0:
-        print("lapwrench run: --duration must be positive", file=sys.stderr)
-        return 2
-    if cfg.robot.control_rate_hz != FRANKA_RATE_HZ:
-        # the shaper and the supervisor would use the configured period while the robot
-        # differentiates over 1 ms: at 500 Hz the commands ask 3.6x its acceleration limit
-        print(
-            f"lapwrench run: robot.control_rate_hz must be {FRANKA_RATE_HZ:.0f} (the Franka differentiates every "
-            f"command over 1 ms), got {cfg.robot.control_rate_hz}",
-            file=sys.stderr,
-        )
+    try:
+        _check_run_arguments(args, cfg, simulated=bool(args.dry_run or frankysim))
+    except CliError as exc:
+        print(f"lapwrench run: {exc}", file=sys.stderr)
         return 2
     if getattr(args, "in_process", False):
         if frankysim:
@@ -156,9 +217,59 @@ def run_main(args: argparse.Namespace) -> int:
     return _run_process(args, cfg)
 
 
+def _check_run_arguments(args: argparse.Namespace, cfg: Any, *, simulated: bool) -> None:
+    """What argparse cannot check alone (combinations, the config, files, the robot's address):
+    a :class:`CliError` names the problem before any device is opened. Fills in ``args.detector``
+    (``classical`` when not given) and ``args.tactile_frame_format``."""
+    if not simulated and not args.robot_ip:
+        raise CliError("--robot-ip is required (or use --dry-run / --frankysim)")
+    if simulated:
+        mode = "--frankysim" if getattr(args, "frankysim", False) else "--dry-run"
+        for flag, value in (("--robot-ip", args.robot_ip), ("--ft", args.ft), ("--tactile", args.tactile)):
+            if value:  # silently ignored otherwise
+                raise CliError(f"{flag} is not used with {mode}, which simulates the robot, the F/T sensor and the"
+                               " tactile array; leave it out")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise CliError("--duration must be a positive finite number of seconds")
+    if cfg.robot.control_rate_hz != FRANKA_RATE_HZ:
+        # the shaper and the supervisor would use the configured period while the robot
+        # differentiates over 1 ms: at 500 Hz the commands ask 3.6x its acceleration limit
+        raise CliError(
+            f"robot.control_rate_hz must be {FRANKA_RATE_HZ:.0f} (the Franka differentiates every "
+            f"command over 1 ms), got {cfg.robot.control_rate_hz}"
+        )
+    if args.ft:
+        parse_ft_url(args.ft)
+    _check_detector(args)
+    args.tactile_frame_format = tactile_format(args, cfg)
+    if args.log:
+        problem = writable_file_problem(args.log)
+        if problem:
+            raise CliError(f"--log {quote(args.log)} {problem}")
+    if not simulated:
+        problem = probe_command_port(args.robot_ip)
+        if problem:
+            raise CliError(f"--robot-ip {problem}")
+
+
+def _check_detector(args: argparse.Namespace) -> None:
+    """``--detector`` only means something with ``--camera``; a model file must exist."""
+    if args.detector is None:
+        args.detector = "classical"
+        return
+    if args.camera is None:
+        raise CliError(f"--detector {quote(args.detector)} needs --camera (the detector runs on its frames)")
+    if args.detector != "classical":
+        path = Path(args.detector)
+        if path.suffix.lower() not in (".onnx", ".pt"):
+            raise CliError(f"--detector must be classical, a .onnx model or .pt weights, got {quote(args.detector)}")
+        if not path.is_file():
+            raise CliError(f"--detector model file {quote(args.detector)} not found")
+
+
 def _main(argv: list[str] | None = None) -> int:
     """Stand-alone entry (``python -m lapwrench.hardware.cli run ...``) until the main CLI wires it."""
-    parser = argparse.ArgumentParser(prog="lapwrench")
+    parser = ArgumentParser(prog="lapwrench")
     sub = parser.add_subparsers(dest="cmd", required=True)
     p_run = sub.add_parser("run", help="run on the robot (or --dry-run in simulation)")
     add_run_arguments(p_run)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.hardware.rt import (
     BEAT_DETECTOR,
     CTL_DET_ERRORS,
@@ -83,7 +83,9 @@ def _detector_main(
     nice: int,
     cpus: tuple[int, ...] | None,
 ) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it
+    # the parent stops it: Ctrl-C and a closed terminal reach the whole process group
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     frames = bus = None
     try:
         if nice:

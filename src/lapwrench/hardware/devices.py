@@ -26,20 +26,59 @@ class CliError(Exception):
 
 # -- device specs -------------------------------------------------------------------------------
 def parse_ft_url(url: str) -> tuple[str, str, int]:
-    """``hex://HOST[:PORT]`` / ``ati://HOST[:PORT]`` → (kind, host, port)."""
-    parts = urlsplit(url)
-    if parts.scheme not in ("hex", "ati") or not parts.hostname:
-        raise CliError(f"--ft must be hex://HOST[:PORT] or ati://HOST[:PORT], got {url!r}")
+    """``hex://HOST[:PORT]`` / ``ati://HOST[:PORT]`` → (kind, host, port); port 1-65535, default 49152."""
+    shown = url if len(url) <= 60 else url[:60] + "..."
     try:
-        port = parts.port or 49152
-    except ValueError as exc:
-        raise CliError(f"--ft {url!r}: bad port") from exc
-    return parts.scheme, parts.hostname, port
+        parts = urlsplit(url)
+        host, port = parts.hostname, parts.port
+    except ValueError as exc:  # a malformed address (``hex://[zz``) or a port out of range
+        raise CliError(f"--ft {shown!r}: not a valid HOST[:PORT] (port 1 to 65535)") from exc
+    if parts.scheme not in ("hex", "ati") or not host:
+        raise CliError(f"--ft must be hex://HOST[:PORT] or ati://HOST[:PORT], got {shown!r}")
+    if port == 0:
+        raise CliError(f"--ft {shown!r}: port must be 1 to 65535")
+    return parts.scheme, host, port or 49152
 
 
 def parse_camera(spec: str) -> int | str:
     """A device index for digits, otherwise the file path or URL."""
     return int(spec) if spec.isdigit() else spec
+
+
+TACTILE_CHECKSUMS = ("none", "sum8", "xor8", "crc16-modbus")
+
+
+def tactile_format(args: argparse.Namespace, cfg: Any) -> Any:
+    """The tactile array's :class:`~lapwrench.drivers.tactile.TactileFrameFormat`: the config's
+    ``tactile`` section (header, checksum, length byte, checksum over the header), with
+    ``--tactile-header`` / ``--tactile-checksum`` taking precedence when given.
+
+    The same format goes to the reader and, in a dry run, to the simulated array's writer, so any
+    format runs end to end. Raises :class:`CliError` for a format the driver refuses.
+    """
+    from lapwrench.drivers.tactile import TactileFrameFormat
+
+    section = getattr(cfg, "tactile", None)  # absent in configurations older than the tactile section
+    default = TactileFrameFormat()
+    header = getattr(args, "tactile_header", None)
+    if header is None:
+        text = getattr(section, "header", None)
+        try:
+            header = default.header if text is None else bytes.fromhex(str(text))
+        except ValueError as exc:
+            raise CliError(f"tactile.header must be bytes in hex, e.g. AA55, got {str(text)[:60]!r}") from exc
+    checksum = getattr(args, "tactile_checksum", None) or getattr(section, "checksum", None) or default.checksum
+    try:
+        return TactileFrameFormat(
+            header=header,
+            checksum=checksum,
+            length_byte=bool(getattr(section, "length_byte", default.length_byte)),
+            checksum_includes_header=bool(
+                getattr(section, "checksum_includes_header", default.checksum_includes_header)
+            ),
+        )
+    except ValueError as exc:
+        raise CliError(f"tactile frame format: {exc}") from exc
 
 
 # -- the dry-run script ---------------------------------------------------------------------------
@@ -78,13 +117,15 @@ class DryRunScript:
 class _TactileWriter:
     """Writes tactile frames of a script to a pty master at ``rate_hz`` (the simulated grip array)."""
 
-    def __init__(self, fd: int, values: Callable[[], np.ndarray], rate_hz: float = 200.0) -> None:
+    def __init__(
+        self, fd: int, values: Callable[[], np.ndarray], rate_hz: float = 200.0, fmt: Any = None
+    ) -> None:
         from lapwrench.drivers.tactile import TactileFrameFormat
 
         self.fd = fd
         self.values = values
         self.period = 1.0 / rate_hz
-        self.fmt = TactileFrameFormat()
+        self.fmt = fmt if fmt is not None else TactileFrameFormat()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="lapwrench-sim-tactile", daemon=True)
 
@@ -133,6 +174,7 @@ def _open_sources(
     sources = Sources()
     described: dict[str, str] = {}
     ft_url, tactile_port = args.ft, args.tactile
+    fmt = getattr(args, "tactile_frame_format", None) or tactile_format(args, cfg)
     if script is not None:
         from lapwrench.drivers.fakes import FakeFTDevice
 
@@ -145,7 +187,7 @@ def _open_sources(
         ft_url = f"hex://127.0.0.1:{fake.port}"
         master, slave = os.openpty()
         devices.add(lambda: (os.close(master), os.close(slave)))
-        writer = _TactileWriter(master, script.tactile).start()
+        writer = _TactileWriter(master, script.tactile, fmt=fmt).start()
         devices.add(writer.stop)
         tactile_port = os.ttyname(slave)
     try:
@@ -160,7 +202,7 @@ def _open_sources(
             sources.ft = ft.buffer
             described["ft"] = ft.device
         if tactile_port:
-            tac = SerialTactileArray(tactile_port, args.tactile_baud)
+            tac = SerialTactileArray(tactile_port, args.tactile_baud, fmt)
             tac.start()
             devices.add(tac.stop)
             if tac.buffer.wait_newer(0, timeout=2.0) is None:
@@ -176,7 +218,7 @@ def _open_sources(
             cam.start()
             devices.add(cam.stop)
             try:
-                detector = make_detector(args.detector, DetectorConfig(frame_size=size))
+                detector = make_detector(args.detector or "classical", DetectorConfig(frame_size=size))
             except (PerceptionError, ImportError) as exc:
                 raise CliError(f"instrument detector {args.detector!r}: {exc}") from exc
             worker = DetectorWorker(cam.buffer, detector).start()
@@ -201,7 +243,8 @@ def _fake_ft_main(
 
     from lapwrench.drivers.fakes import FakeFTDevice
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it: Ctrl-C and a closed terminal
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # reach the whole process group
     if fifo_priority:  # it stands for a device with a CPU of its own: keep it off our CPU contention
         with contextlib.suppress(OSError, AttributeError):
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo_priority))
@@ -271,12 +314,15 @@ class FakeFTProcess:
         self.proc = None
 
 
-def _simulated_devices(devices: _Devices, script: DryRunScript) -> tuple[str, str, FakeFTProcess]:
-    """The dry run's F/T box (loopback UDP, own process) and tactile array (a pty)."""
+def _simulated_devices(
+    devices: _Devices, script: DryRunScript, fmt: Any = None
+) -> tuple[str, str, FakeFTProcess]:
+    """The dry run's F/T box (loopback UDP, own process) and tactile array (a pty) writing frames of
+    ``fmt`` (default: the driver's default format; pass the reader's format)."""
     fake = FakeFTProcess(script.force_H).start()
     devices.add(fake.close)
     master, slave = os.openpty()
     devices.add(lambda: (os.close(master), os.close(slave)))
-    writer = _TactileWriter(master, script.tactile).start()
+    writer = _TactileWriter(master, script.tactile, fmt=fmt).start()
     devices.add(writer.stop)
     return f"hex://127.0.0.1:{fake.port}", os.ttyname(slave), fake

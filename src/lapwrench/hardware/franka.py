@@ -1,11 +1,11 @@
 """A real Franka (Panda or FR3) through pylibfranka: joint position control at 1 kHz.
 
-:class:`FrankaRobot` implements :class:`~lapwrench.robot.interface.RobotInterface` with
+:class:`FrankaRobot` implements :class:`~lapwrench.robot_interface.RobotInterface` with
 ``Robot.start_joint_position_control`` and the ``readOnce``/``writeOnce`` pair: :meth:`read`
 blocks until the robot's next 1 ms state arrives, :meth:`command` answers it with one
 ``JointPositions``. libfranka differentiates the commanded positions and aborts on a velocity,
 acceleration or jerk discontinuity, so every command must come through the
-:class:`~lapwrench.hardware.supervisor.SafetySupervisor`.
+:class:`~lapwrench.safety.supervisor.SafetySupervisor`.
 
 External force convention
 -------------------------
@@ -30,19 +30,53 @@ The estimate only excludes what the robot knows about: give the laparoscope asse
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
+import socket
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
 from lapwrench.robot.description import RobotKind, ScopeGeometry
-from lapwrench.robot.interface import RobotError
+from lapwrench.robot.errors import RobotError
 from lapwrench.sensors import RobotReading
 from lapwrench.spatial import Vec
 
 ExtWrenchSign = Literal["robot_on_environment", "environment_on_robot"]
 RealtimeMode = Literal["enforce", "ignore"]
+
+FRANKA_COMMAND_PORT = 1337  # libfranka's TCP command port (fixed; franky-sim listens there too)
+PROBE_TIMEOUT_S = 3.0
+_UNREACHABLE = {errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN, errno.ENETDOWN, errno.EADDRNOTAVAIL}
+
+
+def probe_command_port(host: str, port: int = FRANKA_COMMAND_PORT, timeout: float = PROBE_TIMEOUT_S) -> str | None:
+    """Whether anything answers at ``host``: ``None`` if it does, otherwise why not (one line).
+
+    libfranka's ``Robot(ip)`` opens a TCP connection to the command port and, when nothing answers
+    (a wrong address, a cable out, the robot off), waits a minute without a word. This opens (and
+    closes at once, sending nothing) the same connection with a short timeout first. A refused
+    connection counts as an answer: the host is up, and libfranka itself reports it at once (FCI
+    not active). Anything else (silence, an unreachable network, an unknown name) is the problem
+    returned.
+    """
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return None
+    except ConnectionRefusedError:
+        return None
+    except socket.gaierror as exc:
+        return f"{host}: unknown host name ({exc.strerror})"
+    except TimeoutError:
+        return (
+            f"{host}: no answer on the Franka command port {port} within {timeout:g} s "
+            "(is the robot on and cabled, and the address right?)"
+        )
+    except OSError as exc:
+        if exc.errno in _UNREACHABLE:
+            return f"{host}: unreachable ({exc.strerror}); check the network cable and the address"
+        return f"{host}: cannot connect to port {port} ({exc.strerror or exc})"
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
 
 def _run_in_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSignals) -> int:
     from lapwrench import config as config_mod
-    from lapwrench.robot.interface import RobotError
+    from lapwrench.robot.errors import RobotError
 
     devices = _Devices()
     logger = None
@@ -80,7 +80,7 @@ def _build_loop(
 ) -> tuple[Any, str]:
     from lapwrench.controller import Controller
     from lapwrench.hardware.runner import ControlLoop, SourceAges
-    from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
+    from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 
     ctrl = Controller(cfg)
     if script is not None:

@@ -31,8 +31,8 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
     from lapwrench.drivers import DeviceError, SerialTactileArray
     from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec
     from lapwrench.hardware.runner import SourceAges
-    from lapwrench.hardware.supervisor import SupervisorConfig
-    from lapwrench.robot.interface import RobotError
+    from lapwrench.robot.errors import RobotError
+    from lapwrench.safety.supervisor import SupervisorConfig
 
     frankysim = bool(getattr(args, "frankysim", False))
     simulated = bool(args.dry_run or frankysim)
@@ -45,12 +45,14 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
         if script is None:
             ft_url, tactile_port = args.ft, args.tactile
         else:
-            ft_url, tactile_port, fake_ft = _simulated_devices(devices, script)
+            ft_url, tactile_port, fake_ft = _simulated_devices(
+                devices, script, getattr(args, "tactile_frame_format", None)
+            )
         described: dict[str, str] = {}
         tactile = None
         try:
             if tactile_port:
-                tac = SerialTactileArray(tactile_port, args.tactile_baud)
+                tac = SerialTactileArray(tactile_port, args.tactile_baud, getattr(args, "tactile_frame_format", None))
                 tac.start()
                 devices.add(tac.stop)
                 if tac.buffer.wait_newer(0, timeout=2.0) is None:

@@ -1,7 +1,7 @@
 """The hardware side of the one control loop (:class:`lapwrench.loop.ControlLoop`).
 
 Every sensor source (F/T, tactile, camera, the instrument detector) runs its own thread or process
-and publishes into a :class:`~lapwrench.drivers.buffer.LatestValue` (or a shared-memory slot of
+and publishes into a :class:`~lapwrench.buffer.LatestValue` (or a shared-memory slot of
 the same shape). The loop only *peeks*: each cycle it takes the newest sample of each buffer if it
 is at most its ``max_age`` old (:class:`SourceAges`), otherwise ``None`` — and a ``None`` input
 switches that source's wrench off in the controller. Nothing in the loop waits on a sensor, a
@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 
 from lapwrench import loop
+from lapwrench.buffer import LatestValue
 from lapwrench.controller import Controller
-from lapwrench.drivers.buffer import LatestValue
 from lapwrench.hardware.log import CycleRecord, RunLogger
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorEvent
 from lapwrench.loop import Cycle, LoopStats
-from lapwrench.robot.interface import RobotInterface
+from lapwrench.robot_interface import RobotInterface
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent
 from lapwrench.sensors import InstrumentObservation
 from lapwrench.sources import BufferSource, Source, ft_reading, instruments_reading, tactile_reading
 from lapwrench.spatial import Vec
@@ -135,7 +135,7 @@ class ControlLoop(loop.ControlLoop):
     """The one control loop on hardware buffers, with wall-clock deadlines and the MCAP logger.
 
     Args:
-        robot: A :class:`~lapwrench.robot.interface.RobotInterface` (Franka or simulation).
+        robot: A :class:`~lapwrench.robot_interface.RobotInterface` (Franka or simulation).
         controller: The controller (reset by :meth:`start` at the robot's measured pose).
         supervisor: The safety supervisor every command passes through.
         sources: Sensor buffers (:class:`Sources`).

@@ -7,8 +7,9 @@ The paper tracks instruments with a YOLOv7 detector (Sec. II-A, IV); each detect
 
 Also here:
 
-- :mod:`~lapwrench.perception.dataset`: the synthetic YOLO dataset rendered by the simulator
-  (:func:`generate_dataset`), labels from MuJoCo segmentation of the instrument jaws;
+- :mod:`~lapwrench.perception.dataset`: the synthetic YOLO dataset's configuration, labels and files
+  (the simulator renders it: :func:`lapwrench.sim.dataset.generate_dataset`, labels from MuJoCo
+  segmentation of the instrument jaws);
 - :mod:`~lapwrench.perception.evaluate`: mAP50 / recall / precision of any detector on a YOLO split
   (:func:`evaluate_detector`);
 - :mod:`~lapwrench.perception.async_detect`: detection at 25 fps with modelled latency for the 1 kHz
@@ -20,7 +21,7 @@ The shipped model is ``lapwrench/data/models/instruments.onnx`` (:data:`SHIPPED_
 library; its model card is the ``README.md`` beside it.
 
 The ultralytics backend, the training code and the ONNX test-model builders import their optional
-packages lazily; MuJoCo is imported only when a dataset is rendered.
+packages lazily. Perception never imports the simulation (the simulation uses the detectors).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from lapwrench.perception.calibration import (
     write_intrinsics_yaml,
 )
 from lapwrench.perception.classical import ClassicalDetector, ClassicalParams
-from lapwrench.perception.dataset import CLASS_NAMES, DatasetConfig, generate_dataset
+from lapwrench.perception.dataset import CLASS_NAMES, DatasetConfig
 from lapwrench.perception.detection import (
     BackendUnavailableError,
     Detection,
@@ -101,7 +102,6 @@ __all__ = [
     "calibrate_from_images",
     "evaluate_detector",
     "evaluate_predictions",
-    "generate_dataset",
     "infer_layout",
     "letterbox",
     "make_detector",

@@ -13,7 +13,22 @@ import os
 import sys
 from pathlib import Path
 
+from lapwrench.cli_types import (
+    ArgumentParser,
+    int_in,
+    nonnegative_float,
+    nonnegative_int,
+    output_dir,
+    output_file,
+    positive_float,
+    quote,
+    writable_dir_problem,
+    writable_file_problem,
+)
+
 DEFAULT_DATASET = "out/datasets/instruments"
+MAX_IMAGES = 10_000_000  # per split
+MAX_SEED = 2**32 - 1
 
 
 # --------------------------------------------------------------------------------------------
@@ -21,20 +36,34 @@ DEFAULT_DATASET = "out/datasets/instruments"
 
 
 def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", default=DEFAULT_DATASET, help="dataset root (default: %(default)s)")
-    parser.add_argument("--train", type=int, default=800, help="training images (default: %(default)s)")
-    parser.add_argument("--val", type=int, default=100, help="validation images (default: %(default)s)")
-    parser.add_argument("--test", type=int, default=200, help="held-out test images (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
-    parser.add_argument("--splits", default="train,val,test",
-                        help="comma-separated splits to (re)generate (default: %(default)s)")
+    images = int_in(0, MAX_IMAGES)
+    parser.add_argument("--out", type=output_dir, default=DEFAULT_DATASET, help="dataset root (default: %(default)s)")
+    parser.add_argument("--train", type=images, default=800, help="training images (default: %(default)s)")
+    parser.add_argument("--val", type=images, default=100, help="validation images (default: %(default)s)")
+    parser.add_argument("--test", type=images, default=200, help="held-out test images (default: %(default)s)")
+    parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="random seed (default: %(default)s)")
+    parser.add_argument("--splits", type=_splits, default="train,val,test",
+                        help="comma-separated splits to (re)generate: train, val, test (default: %(default)s)")
+
+
+def _splits(text: str) -> str:
+    """A non-empty comma-separated subset of train, val, test."""
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names or any(n not in ("train", "val", "test") for n in names):
+        raise argparse.ArgumentTypeError(f"must be comma-separated names from train, val, test, got {quote(text)}")
+    return ",".join(names)
 
 
 def dataset_main(args: argparse.Namespace) -> int:
     """Render the synthetic YOLO dataset (needs MuJoCo rendering: MUJOCO_GL=egl when headless)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    from lapwrench.perception.dataset import DatasetConfig, generate_dataset
+    from lapwrench.perception.dataset import DatasetConfig
+    from lapwrench.sim.dataset import generate_dataset  # the rendering needs the simulator
 
+    problem = writable_dir_problem(args.out)
+    if problem:
+        print(f"lapwrench dataset: --out {quote(args.out)} {problem}", file=sys.stderr)
+        return 2
     try:
         cfg = DatasetConfig(n_train=args.train, n_val=args.val, n_test=args.test, seed=args.seed)
         splits = [s.strip() for s in args.splits.split(",") if s.strip()]
@@ -45,7 +74,11 @@ def dataset_main(args: argparse.Namespace) -> int:
 
         summary = generate_dataset(args.out, cfg, splits=splits, progress=progress)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"lapwrench dataset: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the folder became unwritable, or the disk is full
+        print(f"lapwrench dataset: cannot write the dataset to {quote(args.out)}: {exc.strerror or exc}",
+              file=sys.stderr)
         return 2
     print(f"dataset: {summary.root} ({summary.seconds:.0f} s)")
     for s in summary.images:
@@ -60,29 +93,56 @@ def dataset_main(args: argparse.Namespace) -> int:
 
 def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", default=f"{DEFAULT_DATASET}/data.yaml", help="data.yaml (default: %(default)s)")
-    parser.add_argument("--out", default="out/train", help="run directory root (default: %(default)s)")
-    parser.add_argument("--name", default="instruments", help="run name (default: %(default)s)")
-    parser.add_argument("--scale", default="n", help="YOLO11 scale: p (pico), u, n (default: %(default)s)")
-    parser.add_argument("--imgsz", type=int, default=320, help="training image size (default: %(default)s)")
-    parser.add_argument("--epochs", type=int, default=60, help="epochs (default: %(default)s)")
-    parser.add_argument("--time-hours", type=float, default=None,
+    parser.add_argument("--out", type=output_dir, default="out/train",
+                        help="run directory root (default: %(default)s)")
+    parser.add_argument("--name", type=_run_name, default="instruments", help="run name (default: %(default)s)")
+    parser.add_argument("--scale", choices=("p", "u", "n"), default="n",
+                        help="YOLO11 scale: p (pico), u, n (default: %(default)s)")
+    parser.add_argument("--imgsz", type=int_in(32, 4096), default=320,
+                        help="training image size, 32 to 4096 (default: %(default)s)")
+    parser.add_argument("--epochs", type=int_in(1, 100_000), default=60, help="epochs (default: %(default)s)")
+    parser.add_argument("--time-hours", type=positive_float, default=None,
                         help="wall-time budget; ultralytics fits the epochs into it")
-    parser.add_argument("--batch", type=int, default=16, help="batch size (default: %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
-    parser.add_argument("--workers", type=int, default=2, help="data loader workers (default: %(default)s)")
-    parser.add_argument("--threads", type=int, default=2, help="torch CPU threads (default: %(default)s)")
-    parser.add_argument("--export-hw", default="256x320",
-                        help="ONNX input HEIGHTxWIDTH (default: %(default)s)")
+    parser.add_argument("--batch", type=int_in(1, 4096), default=16, help="batch size (default: %(default)s)")
+    parser.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="random seed (default: %(default)s)")
+    parser.add_argument("--workers", type=int_in(0, 256), default=2,
+                        help="data loader workers, 0: in the main process (default: %(default)s)")
+    parser.add_argument("--threads", type=int_in(1, 1024), default=2, help="torch CPU threads (default: %(default)s)")
+    parser.add_argument("--export-hw", type=_height_width, default="256x320",
+                        help="ONNX input HEIGHTxWIDTH, multiples of 32 (default: %(default)s)")
     parser.add_argument("--init-weights", default=None,
                         help="start from an earlier run's weights (e.g. out/train/NAME/weights/best.pt)")
     parser.add_argument("--optimizer", default="auto", help="ultralytics optimizer (default: %(default)s)")
-    parser.add_argument("--lr0", type=float, default=None,
+    parser.add_argument("--lr0", type=positive_float, default=None,
                         help="initial learning rate (ultralytics default; ignored with --optimizer auto)")
-    parser.add_argument("--warmup-epochs", type=float, default=None, help="warm-up epochs (ultralytics default)")
-    parser.add_argument("--close-mosaic", type=int, default=10,
+    parser.add_argument("--warmup-epochs", type=nonnegative_float, default=None,
+                        help="warm-up epochs (ultralytics default)")
+    parser.add_argument("--close-mosaic", type=nonnegative_int, default=10,
                         help="final epochs without mosaic augmentation (default: %(default)s)")
-    parser.add_argument("--ship", type=Path, default=None,
+    parser.add_argument("--ship", type=_output_path, default=None,
                         help="also copy the exported ONNX here (e.g. src/lapwrench/data/models/instruments.onnx)")
+
+
+def _output_path(text: str) -> Path:
+    return Path(output_file(text))
+
+
+def _run_name(text: str) -> str:
+    """A run name is one folder name under ``--out``."""
+    if not text.strip() or "/" in text or "\\" in text or text in (".", "..") or "\0" in text or len(text) > 200:
+        raise argparse.ArgumentTypeError(f"must be a plain folder name, got {quote(text)}")
+    return text
+
+
+def _height_width(text: str) -> str:
+    """``HEIGHTxWIDTH`` in pixels, both multiples of 32 from 32 to 4096 (YOLO's stride)."""
+    try:
+        h, w = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be HEIGHTxWIDTH, e.g. 256x320, got {quote(text)}") from None
+    if not all(32 <= v <= 4096 and v % 32 == 0 for v in (h, w)):
+        raise argparse.ArgumentTypeError(f"must be multiples of 32 from 32 to 4096, got {quote(text)}")
+    return f"{h}x{w}"
 
 
 def train_main(args: argparse.Namespace) -> int:
@@ -97,15 +157,19 @@ def train_main(args: argparse.Namespace) -> int:
                                  warmup_epochs=args.warmup_epochs, close_mosaic=args.close_mosaic,
                                  optimizer=args.optimizer)
         if not Path(args.data).is_file():
-            print(f"error: {args.data} not found; generate the dataset first (dataset subcommand)", file=sys.stderr)
+            print(f"lapwrench train: --data {quote(args.data)} not found; generate the dataset first (dataset"
+                  " subcommand)", file=sys.stderr)
+            return 2
+        if args.init_weights is not None and not Path(args.init_weights).is_file():
+            print(f"lapwrench train: --init-weights {quote(args.init_weights)} not found", file=sys.stderr)
             return 2
         result = train(settings)
     except ImportError as exc:
-        print(f"error: training needs torch and ultralytics (scripts/train_detector.sh setup): {exc}",
+        print(f"lapwrench train: training needs torch and ultralytics (scripts/train_detector.sh setup): {exc}",
               file=sys.stderr)
         return 2
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"lapwrench train: {exc}", file=sys.stderr)
         return 2
     print(f"best weights: {result.best_pt}")
     print(f"ONNX: {result.onnx}")
@@ -124,20 +188,27 @@ def train_main(args: argparse.Namespace) -> int:
 
 
 def _board(text: str) -> tuple[int, int]:
+    """``COLSxROWS`` inner corners of the checkerboard, each from 2 to 100."""
     try:
         cols, rows = (int(x) for x in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"board must be COLSxROWS inner corners, e.g. 9x6, got {text!r}") from None
+        cols = rows = 0
+    if not (2 <= cols <= 100 and 2 <= rows <= 100):
+        raise argparse.ArgumentTypeError(
+            f"board must be COLSxROWS inner corners (2 to 100 each), e.g. 9x6, got {quote(text)}"
+        )
     return cols, rows
 
 
 def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("images", nargs="+", help="checkerboard images: files or glob patterns (quoted)")
     parser.add_argument("--board", type=_board, default=(9, 6), help="inner corners COLSxROWS (default: 9x6)")
-    parser.add_argument("--square", type=float, default=0.025, help="square edge in metres (default: %(default)s)")
-    parser.add_argument("--out", type=Path, default=Path("intrinsics.yaml"),
+    parser.add_argument("--square", type=positive_float, default=0.025,
+                        help="square edge in metres (default: %(default)s)")
+    parser.add_argument("--out", type=_output_path, default=Path("intrinsics.yaml"),
                         help="intrinsics YAML to write (default: %(default)s)")
-    parser.add_argument("--min-views", type=int, default=3, help="fewest usable views (default: %(default)s)")
+    parser.add_argument("--min-views", type=int_in(1, 100_000), default=3,
+                        help="fewest usable views (default: %(default)s)")
     parser.add_argument("--fix-k3", action="store_true", help="hold the k3 distortion term at zero")
 
 
@@ -151,6 +222,12 @@ def calibrate_main(args: argparse.Namespace) -> int:
     """
     from lapwrench.perception.calibration import CalibrationError, calibrate_from_images, write_intrinsics_yaml
 
+    out = Path(args.out)
+    for target in (out, out.with_name(out.stem + ".calibration.yaml")):
+        problem = writable_file_problem(target)
+        if problem:
+            print(f"lapwrench calibrate: --out {quote(str(target))} {problem}", file=sys.stderr)
+            return 2
     paths: list[str] = []
     for pattern in args.images:
         matches = sorted(glob.glob(pattern))
@@ -159,9 +236,13 @@ def calibrate_main(args: argparse.Namespace) -> int:
         result = calibrate_from_images(paths, board=args.board, square_size=args.square, min_views=args.min_views,
                                        fix_k3=args.fix_k3)
     except CalibrationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"lapwrench calibrate: {exc}", file=sys.stderr)
         return 2
-    out, details = write_intrinsics_yaml(result, args.out, split=True)
+    try:
+        out, details = write_intrinsics_yaml(result, args.out, split=True)
+    except OSError as exc:
+        print(f"lapwrench calibrate: cannot write {quote(str(args.out))}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(f"fx={result.fx:.3f} fy={result.fy:.3f} u0={result.u0:.3f} v0={result.v0:.3f} "
           f"({result.width}x{result.height}), RMS reprojection error {result.rms:.4f} px, "
           f"{len(result.used)} views used, {len(result.rejected)} rejected")
@@ -175,7 +256,7 @@ def calibrate_main(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m lapwrench.perception.cli", description=__doc__,
+    parser = ArgumentParser(prog="python -m lapwrench.perception.cli", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     for name, add, fn, help_ in (

@@ -54,15 +54,6 @@ class EvalResult:
     score_threshold: float
     ms_per_frame: float | None = None
 
-    def as_dict(self, prefix: str = "") -> dict[str, float | int | None]:
-        return {
-            f"{prefix}map50": round(self.map50, 4),
-            f"{prefix}recall": round(self.recall, 4),
-            f"{prefix}precision": round(self.precision, 4),
-            f"{prefix}images_count": self.n_images,
-            f"{prefix}ground_truth_count": self.n_ground_truth,
-        }
-
 
 def read_yolo_labels(path: str | os.PathLike[str], image_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Boxes (xyxy pixels) and classes from a YOLO label file for an image of ``(w, h)``.

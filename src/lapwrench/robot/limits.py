@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from lapwrench.robot.description import build_urdf
 from lapwrench.spatial import Vec
 
 _TABLE: dict[str, dict[str, list[float]]] = {
@@ -57,14 +58,13 @@ class JointLimits:
 
 
 def franka_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
-    """The Franka limits of ``kind`` ('panda' or 'fr3'); position limits from ``model``."""
+    """The Franka limits of ``kind`` ('panda' or 'fr3'); position limits from ``model`` (by default the
+    Pinocchio model of the arm's description, as :class:`~lapwrench.robot.model.RobotModel` builds it)."""
     if kind not in _TABLE:
         raise ValueError(f"no limit table for robot {kind!r}; choose one of {sorted(_TABLE)}")
     t = {k: np.array(v, dtype=float) for k, v in _TABLE[kind].items()}
     if model is None:
-        from lapwrench.robot.model import RobotModel
-
-        model = RobotModel(kind).model  # type: ignore[arg-type]
+        model = pin.buildModelFromXML(build_urdf(kind))  # type: ignore[arg-type]
     return JointLimits(
         np.array(model.lowerPositionLimit, dtype=float),
         np.array(model.upperPositionLimit, dtype=float),

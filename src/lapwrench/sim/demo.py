@@ -9,6 +9,7 @@ report.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import multiprocessing as mp
 import os
@@ -16,10 +17,12 @@ import platform
 import shutil
 import signal
 import time
+import traceback
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from queue import Empty
+from types import SimpleNamespace
 from typing import Any
 
 import mujoco
@@ -28,10 +31,12 @@ from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.sim import report
 from lapwrench.sim.loop import SafetyStopError
-from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions, ScenarioResult, needle_search
+from lapwrench.sim.results import ScenarioOptions, ScenarioResult
+from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, needle_search
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError
 
 TRACKING_SCENARIOS = ("needle-search", "workflow")
+MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits
 
 
 class DemoError(RuntimeError):
@@ -64,17 +69,22 @@ def plan_demo(
     detector: str = "shipped",
     workers: int | None = None,
 ) -> DemoPlan:
-    """Validate everything (names, configs, output folder) and return the plan."""
+    """Validate everything (names, numbers, configs, the detector's model, output folder) and return
+    the plan. Nothing is simulated, written or deleted before every check has passed."""
     if workers is None:
         workers = min(4, os.cpu_count() or 1)
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 64:
         raise DemoError(f"workers must be a whole number from 1 to 64, got {workers!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise DemoError(f"seed must be a whole number from 0 to {MAX_SEED}, got {str(seed)[:60]}")
     names = tuple(scenarios or SCENARIOS)
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
-        raise DemoError(f"unknown scenario {', '.join(unknown)}; choose from {', '.join(SCENARIOS)}")
+        raise DemoError(f"unknown scenario {', '.join(n[:60] for n in unknown)}; choose from {', '.join(SCENARIOS)}")
     if detector not in ("shipped", "classical", "projected") and not Path(detector).is_file():
-        raise DemoError(f"detector must be shipped, classical, projected or a model file; {detector} not found")
+        raise DemoError(
+            f"detector must be shipped, classical, projected or a model file; {detector[:60]!r} not found"
+        )
     if detector == "shipped":
         from lapwrench.perception import SHIPPED_MODEL
 
@@ -93,6 +103,7 @@ def plan_demo(
                 f"robot.control_rate_hz must be {1.0 / CONTROL_DT:.0f} (the simulated Franka runs at 1 kHz), "
                 f"got {c.robot.control_rate_hz}"
             )
+    _check_detector(detector, tracking)
     try:
         out = config_mod.ensure_writable_dir(out)
     except OSError as exc:
@@ -114,6 +125,23 @@ def plan_demo(
         detector,
         workers,
     )
+
+
+def _check_detector(spec: str, cfg: config_mod.Config) -> None:
+    """Load the detector now, through the factory the scenarios use, whatever scenarios run: a bad
+    model is refused here, before anything is simulated or the folder's previous report is touched,
+    not when a tracking scenario starts minutes later."""
+    if spec == "projected":
+        return
+    from lapwrench.perception import PerceptionError
+    from lapwrench.sim.loop import make_detector
+
+    try:
+        make_detector(spec, SimpleNamespace(n_instruments=1), cfg)  # type: ignore[arg-type]
+    except (PerceptionError, ImportError, OSError, ValueError) as exc:
+        detail = " ".join(str(exc).split())
+        detail = detail if len(detail) <= 240 else detail[:237] + "..."
+        raise DemoError(f"detector {spec[:60]!r} cannot be used: {detail}") from exc
 
 
 PRINTED_DAMPING = "needle-search, printed damping"
@@ -166,7 +194,10 @@ def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, Scenario
         try:
             for name in names:
                 bar.set_postfix_str(name)
-                _, res, err = _task(name, plan)
+                try:
+                    _, res, err = _task(name, plan)
+                except Exception as exc:  # as from a worker: one line, FAILED.txt (with the traceback)
+                    raise DemoError(f"scenario '{name}' failed: {type(exc).__name__}: {exc}") from exc
                 if err:
                     raise DemoError(err)
                 out[name] = res
@@ -261,9 +292,9 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
     names = list(plan.scenarios) + ([PRINTED_DAMPING] if plan.printed_damping_check else [])
     try:
         done = _run_tasks(plan, names, bar)
-    except DemoError as exc:
+    except (DemoError, KeyboardInterrupt) as exc:
         bar.close()
-        (out / "FAILED.txt").write_text(f"{exc}\n")
+        _write_failed(out, exc)
         raise
     bar.update(max(0.0, bar.total - bar.n))
     bar.close()
@@ -290,6 +321,17 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
     report.write_metrics(out, results, meta)  # type: ignore[arg-type]
     report.write_report(out, results, meta, figures)  # type: ignore[arg-type]
     return results  # type: ignore[return-value]
+
+
+def _write_failed(out: Path, exc: BaseException) -> None:
+    """``FAILED.txt``: why the run stopped (and where, for an unexpected exception), in place of the
+    report the run deleted at its start."""
+    text = "interrupted (Ctrl-C); no report was written" if isinstance(exc, KeyboardInterrupt) else str(exc)
+    cause = exc.__cause__
+    if cause is not None:
+        text += "\n\n" + "".join(traceback.format_exception(cause))
+    with contextlib.suppress(OSError):
+        (out / "FAILED.txt").write_text(text + "\n")
 
 
 def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:

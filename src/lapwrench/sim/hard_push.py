@@ -33,7 +33,7 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
-from lapwrench.sim.scenarios import Run, ScenarioOptions, ScenarioResult, run_metrics
+from lapwrench.sim.results import Run, ScenarioOptions, ScenarioResult, run_metrics
 from lapwrench.sim.surgeon import SpeedDrivenHand, across_shaft, axis_angle
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError, SimWorld
 

@@ -15,11 +15,11 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
-from lapwrench.hardware.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.loop import ControlLoop
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.model import RobotModel
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 from lapwrench.sim.scene import SceneConfig, build_scene
@@ -221,7 +221,7 @@ class ClosedLoop:
         wrench must already be set.
 
         The supervisor watches *measured* state only: the RCM error and the insertion depth at the
-        joints the robot reads (:func:`~lapwrench.hardware.supervisor.measure_scope`, for the
+        joints the robot reads (:func:`~lapwrench.safety.supervisor.measure_scope`, for the
         controller's p_R) and the residual ΔF of the controller's sensors; the simulator's ground
         truth (:meth:`physical_rcm_error`, the contact force) is for metrics only. An exception
         from the controller's tick is an alarm too.

@@ -13,7 +13,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from lapwrench.config import Config
-from lapwrench.sim.scenarios import ScenarioResult
+from lapwrench.sim.results import ScenarioResult
+from lapwrench.sim.video import annotate_frame
 
 MODES = ["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
 MODE_COLORS = {
@@ -145,34 +146,6 @@ def plot_hard_push(res: ScenarioResult, out: Path) -> list[str]:
     handles = [plt.Line2D([], [], c=colors[k]) for k in kinds]
     ax[2].legend(handles, kinds, fontsize=8)
     return [_save(fig, out / "hard_push.png")]
-
-
-def annotate_frame(frame: np.ndarray, cfg: Config, label: str) -> np.ndarray:
-    import cv2
-
-    img = np.ascontiguousarray(frame.copy())
-    c = (round(cfg.camera.u0), round(cfg.camera.v0))
-    cv2.circle(img, c, int(cfg.tracking.epsilon1), (255, 255, 255), 1, cv2.LINE_AA)
-    cv2.circle(img, c, int(cfg.tracking.epsilon2), (255, 255, 0), 1, cv2.LINE_AA)
-    cv2.putText(img, label, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 2, cv2.LINE_AA)
-    return img
-
-
-class VideoWriter:
-    """MP4 of the laparoscope view (H.264 through imageio-ffmpeg), frames annotated as they come."""
-
-    def __init__(self, path: Path, cfg: Config, fps: float = 25.0) -> None:
-        import imageio.v2 as imageio
-
-        self.path = path
-        self.cfg = cfg
-        self._w = imageio.get_writer(path, fps=fps, codec="libx264", quality=6, macro_block_size=16)
-
-    def add(self, frame: np.ndarray, label: str) -> None:
-        self._w.append_data(annotate_frame(frame, self.cfg, label))
-
-    def close(self) -> None:
-        self._w.close()
 
 
 def snapshot_strip(snapshots: list[tuple[np.ndarray, str]], cfg: Config, path: Path, n: int = 6) -> str:

@@ -33,7 +33,7 @@ from typing import Literal
 import numpy as np
 
 from lapwrench.robot.description import RobotKind
-from lapwrench.robot.interface import RobotError
+from lapwrench.robot.errors import RobotError
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import RobotReading
 from lapwrench.sim.sensors import ExternalForceObserver
@@ -68,7 +68,7 @@ class ForceEstimateConfig:
 
 
 class SimRobot:
-    """A simulated arm with the :class:`~lapwrench.robot.interface.RobotInterface` calls.
+    """A simulated arm with the :class:`~lapwrench.robot_interface.RobotInterface` calls.
 
     Args:
         world: The simulated world (its scene fixes the robot kind and the scope).

@@ -17,15 +17,15 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from lapwrench.config import Config
-from lapwrench.robot.limits import limit_usage
+from lapwrench.sim.hard_push import hard_push as run_hard_push
 from lapwrench.sim.loop import ClosedLoop, Trace
-from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, InstrumentPath, axis_angle, rotate_axis
+from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, run_metrics
+from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, InstrumentPath, rotate_axis
+from lapwrench.sim.video import VideoWriter
 from lapwrench.sim.world import CONTROL_DT
 
 PAPER = {
@@ -39,31 +39,6 @@ TISSUE_DEPTH = 0.145  # m below the incision (the phantom's tissue surface)
 HAND_FORCE = 25.0
 
 
-@dataclass
-class Run:
-    label: str
-    trace: Trace
-    metrics: dict[str, float | str | None]
-
-
-@dataclass
-class ScenarioResult:
-    name: str
-    runs: list[Run]
-    metrics: dict[str, object]
-    frames: list[tuple[np.ndarray, str]] = field(default_factory=list)  # (frame, label) snapshots
-    instrument_source: str = ""
-
-
-@dataclass(frozen=True)
-class ScenarioOptions:
-    seed: int = 0
-    time_scale: float = 1.0
-    video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
-    progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
-    detector: str = "shipped"  # "shipped", "classical", "projected" or a model path
-
-
 def _tissue_point(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
     return loop.world.incision_rest_position() + np.array([x, y, -TISSUE_DEPTH])
 
@@ -71,53 +46,6 @@ def _tissue_point(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
 def _axis_toward(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
     v = np.array([x, y, -TISSUE_DEPTH])
     return v / np.linalg.norm(v)
-
-
-def loop_compute_metrics(loop: ClosedLoop) -> dict[str, float | int]:
-    """The control loop's own figures over the run: compute time per cycle (wall clock, from the
-    robot's read to the command) and the cycles over the supervisor's 800 µs budget. The simulated
-    robot waits for the loop, so these are reported, not enforced (a real robot enforces them)."""
-    c = np.asarray(loop.compute_us)
-    if not c.size:
-        return {}
-    return {
-        "loop_compute_p50_us": float(np.percentile(c, 50)),
-        "loop_compute_p99_us": float(np.percentile(c, 99)),
-        "loop_over_budget_cycles": int(np.sum(c > loop.supervisor.cfg.cycle_budget * 1e6)),
-    }
-
-
-def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | None = None) -> dict:
-    """Physical metrics of one run."""
-    F = np.linalg.norm(trace["contact_force"], axis=1)
-    phys = trace["rcm_error_phys"] * 1e3
-    usage = limit_usage(trace["q_ref"], CONTROL_DT, loop.model.limits, loop.q0)
-    sim_time = float(trace["t"][-1] + CONTROL_DT)
-    m: dict[str, float | str | None] = {
-        "duration_s": sim_time,
-        "rcm_error_max_mm": float(phys.max()),
-        "rcm_error_rms_mm": float(np.sqrt(np.mean(phys**2))),
-        "rcm_controller_error_max_mm": float(trace["rcm_error_ctrl"].max() * 1e3),
-        "trocar_force_max_N": float(F.max()),
-        "trocar_time_above_5N_s": float(np.sum(F > 5.0) * CONTROL_DT),
-        "limit_velocity_usage": usage["velocity"],
-        "limit_acceleration_usage": usage["acceleration"],
-        "limit_jerk_usage": usage["jerk"],
-        "limit_position_excess": usage["position_excess"],
-        "references_inside_limits": bool(
-            max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1.0 and usage["position_excess"] == 0.0
-        ),
-        "real_time_factor": sim_time / wall if wall > 0 else None,
-        "insertion_drift_mm": float(np.ptp(trace["insertion_depth"]) * 1e3),
-    }
-    m.update(loop_compute_metrics(loop))
-    if "pixel_error" in trace:
-        px = trace["pixel_error"]
-        seen = px[np.isfinite(px)]
-        m["tracking_error_median_px"] = float(np.median(seen)) if seen.size else None
-        m["tracking_error_p90_px"] = float(np.percentile(seen, 90)) if seen.size else None
-        m["instrument_visible_fraction"] = float(seen.size / px.size)
-    return m
 
 
 def _pixel_error(loop: ClosedLoop, index: int) -> float:
@@ -142,7 +70,7 @@ def _park_instruments(loop: ClosedLoop) -> None:
 # --------------------------------------------------------------------------- grip (Fig. 4)
 
 
-def grip(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Same 10° view adjustment from the same pose at three grip forces; completion times.
 
     ``time_scale`` < 1 shortens the adjustment to 10° x time_scale."""
@@ -185,7 +113,7 @@ def grip(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResu
 # --------------------------------------------------------------------------- disturbance (Fig. 5)
 
 
-def rcm_disturbance(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """10 mm housing shift at t = 3.6 s with and without RCM adaptation; ΔF(t) both ways."""
     runs = []
     duration = max(6.0, 12.0 * opts.time_scale)
@@ -245,8 +173,6 @@ def _scripted_run(
     snapshots: list[tuple[np.ndarray, str]] = []
     writer = None
     if opts.video_dir is not None:
-        from lapwrench.sim.report import VideoWriter
-
         writer = VideoWriter(opts.video_dir / f"{name}.mp4", cfg)
 
     def on_frame(frame: np.ndarray, t: float, mode: str) -> None:
@@ -285,7 +211,7 @@ def _scripted_run(
     )
 
 
-def needle_search(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+def needle_search(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Tracking only (t0-t3) → handle & tracking (t3-t5) → handle dominant, search (t5-t7) →
     release, tracking re-engages on the instrument brought to the needle (t7-t9)."""
     s = opts.time_scale
@@ -333,7 +259,7 @@ def needle_search(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Sce
 # --------------------------------------------------------------------------- workflow (Fig. 9)
 
 
-def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+def workflow(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Handle to the first gauze pad, tracking while it is picked up and the second one found,
     handle again toward the gallbladder, tracking to the end (Fig. 9, 40 s)."""
     s = opts.time_scale
@@ -378,11 +304,9 @@ def workflow(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> Scenario
 # --------------------------------------------------------------------------- hard push (issue 9)
 
 
-def hard_push(cfg: Config, opts: ScenarioOptions = ScenarioOptions()) -> ScenarioResult:
+def hard_push(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Lateral and axial pushes, a speed-driven hand and a roll torque (see :mod:`lapwrench.sim.hard_push`)."""
-    from lapwrench.sim.hard_push import hard_push as run
-
-    return run(cfg, opts)
+    return run_hard_push(cfg, opts)
 
 
 SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
@@ -395,6 +319,3 @@ SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
 # hard-push: 28 runs of 1.5 s push + 1 s settling (lapwrench.sim.hard_push.total_sim_seconds())
 SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0, "hard-push": 70.0}
 
-
-def axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    return math.degrees(axis_angle(a, b))

@@ -110,11 +110,6 @@ class CameraIntrinsics:
     def from_config(cls, cam: CameraConfig) -> CameraIntrinsics:
         return cls(cam.width, cam.height, cam.fx, cam.fy, cam.u0, cam.v0)
 
-    @property
-    def matrix(self) -> np.ndarray:
-        """3x3 camera matrix K."""
-        return np.array([[self.fx, 0.0, self.u0], [0.0, self.fy, self.v0], [0.0, 0.0, 1.0]])
-
     def project(self, p_c: np.ndarray) -> np.ndarray:
         """Pixel coordinates (u, v) of points given in the camera frame {C} (shape (..., 3))."""
         p = np.asarray(p_c, dtype=float)

@@ -174,11 +174,6 @@ class SpeedDrivenHand:
         if self.speed <= 0 or self.max_force <= 0 or self.force_rate <= 0 or self.grip_force < 0:
             raise ValueError("speed, max_force and force_rate must be > 0, grip_force >= 0")
 
-    @property
-    def perceived_speed(self) -> float:
-        """The shaft's angular speed (rad/s) as the hand perceives it."""
-        return self._speed
-
     def apply(self, world: SimWorld, t: float, dt: float) -> float:
         """Set the hand wrench on the world; returns the grip force (0 once released)."""
         _, d = world.shaft_axis()

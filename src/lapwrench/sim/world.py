@@ -45,7 +45,7 @@ import numpy as np
 
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
-from lapwrench.robot.interface import RobotError
+from lapwrench.robot.errors import RobotError
 from lapwrench.sim.scene import (
     CAMERA_NAME,
     HOUSING_BODY,
@@ -181,8 +181,12 @@ def _substep_torque(
     n_substeps: int,
     tick: float,
 ) -> None:
-    """Add the substep just taken to the tick's torque sum (see ``SimWorld._substep_joint_torque``);
-    after the ``last`` one, write the tick mean of the link-side torque into its ``work`` row."""
+    """Add the substep just taken to the tick's torque sum; after the ``last`` one, write the tick mean
+    of the link-side torque into its ``work`` row.
+
+    The servo plus joint damping torque as ``implicitfast`` applied them over the substep: their
+    velocity terms act at the end-of-substep velocity, -(kv + b) dv on top of the values at its start,
+    except on a servo clipped at tau_max (then its torque does not depend on velocity)."""
     for i in range(idx.shape[1]):
         a = idx[1, i]
         v = qvel[a]
@@ -613,18 +617,6 @@ class SimWorld:
                 mujoco.mj_step(m, d)  # d.qfrc_* now hold this substep's forces, d.qvel its end velocity
             substep_torque(*args, k == n - 1, n, tick)
 
-    def _substep_joint_torque(self, dv: np.ndarray) -> np.ndarray:
-        """Servo plus joint damping torque as ``implicitfast`` applied them over the substep just taken.
-
-        Their velocity terms act at the end-of-substep velocity: -(kv + b) dv on top of the values at
-        its start, except on a servo clipped at tau_max (then its torque does not depend on velocity).
-        The tick uses the same law compiled (``_substep_torque``); this is its plain reference.
-        """
-        d, v = self.data, self._vsl
-        tau = d.qfrc_actuator[v]
-        kv = self._kv * (np.abs(tau) < self._tau_free)
-        return tau + d.qfrc_damper[v] - (kv + self._dof_damping) * dv
-
     def _check(self) -> None:
         d = self.data
         code = self._end_tick(
@@ -685,7 +677,7 @@ class SimWorld:
         """tau_J averaged over the last 1 ms tick (N m): the torque that moved the arm during it.
 
         The mean over the substeps of the servo and joint damping torques as the integrator applied
-        them (see :meth:`_substep_joint_torque`), minus the armature's share, armature x (change of
+        them (see :func:`_substep_torque`), minus the armature's share, armature x (change of
         velocity over the tick) / tick. After :meth:`reset` it is the instantaneous
         :meth:`joint_torque_measured`.
         """

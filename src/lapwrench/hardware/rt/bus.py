@@ -1,16 +1,14 @@
 """The shared-memory bus of the real-time process: its sizes, control words, heartbeat stamps,
-phases and :func:`bus_layout` (every process builds the same layout)."""
+phases and :func:`bus_layout` (every process builds the same layout). The slot sizes are
+:mod:`lapwrench.hardware.rt.sizes`' (the cycle codec needs them too) and are re-exported here."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from lapwrench.hardware.rt.codec import CycleCodec
+from lapwrench.hardware.rt.sizes import EVENT_BYTES, MAX_POINTS, TACTILE_N
 from lapwrench.hardware.shm import Layout
-
-MAX_POINTS = 16
-"""Instrument points the instruments slot holds (more detections are cut, best first)."""
-TACTILE_N = 64
-EVENT_BYTES = 320
 
 # control words (int64) and heartbeat stamps (float64) on the bus
 CTL_STOP, CTL_PHASE, CTL_CYCLES, CTL_DET_STOP, CTL_DET_FRAMES, CTL_DET_ERRORS = 0, 1, 2, 3, 4, 5
@@ -20,8 +18,6 @@ PHASE_STARTING, PHASE_READY, PHASE_RUNNING, PHASE_DONE = 0, 1, 2, 3
 
 def bus_layout(log_rows: int = 4096, event_rows: int = 1024) -> Layout:
     """The regions of the real-time bus (every process builds the same layout)."""
-    from lapwrench.hardware.rt.codec import CycleCodec  # not at the top: the codec imports the sizes above
-
     return (
         Layout()
         .add("ctl", np.int64, (16,))

@@ -31,7 +31,7 @@ from lapwrench.hardware.rt.options import apply_realtime
 from lapwrench.hardware.rt.peers import PeerSpec, PeerWatch
 from lapwrench.hardware.rt.spec import FtSpec, RtSpec
 from lapwrench.hardware.shm import Bus
-from lapwrench.robot.interface import RobotError
+from lapwrench.robot.errors import RobotError
 
 
 class _CycleHooks:
@@ -118,7 +118,7 @@ def _open_ft(spec: FtSpec) -> Any:
 def _warm_up(ctrl: Any, spec: RtSpec) -> None:
     """Run the loop's own per-cycle code once outside the loop (first calls compile or allocate:
     measured 22 ms for the first ``measure_scope``), on throwaway state."""
-    from lapwrench.hardware.supervisor import SafetySupervisor, measure_scope
+    from lapwrench.safety.supervisor import SafetySupervisor, measure_scope
     from lapwrench.virtual import DEFAULT_Q0
 
     q = np.array(DEFAULT_Q0, dtype=float)
@@ -135,7 +135,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
     from lapwrench.controller import Controller
     from lapwrench.drivers.base import DeviceError
     from lapwrench.hardware.runner import ControlLoop, Sources
-    from lapwrench.hardware.supervisor import SafetySupervisor
+    from lapwrench.safety.supervisor import SafetySupervisor
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which asks for the stop
     stop_flag: _StopFlag | None = None

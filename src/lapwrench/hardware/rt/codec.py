@@ -10,7 +10,7 @@ from typing import ClassVar
 import numpy as np
 
 from lapwrench.hardware.log import CycleRecord
-from lapwrench.hardware.rt.bus import MAX_POINTS, TACTILE_N
+from lapwrench.hardware.rt.sizes import MAX_POINTS, TACTILE_N
 from lapwrench.hardware.shm import Ring, pack_event
 
 

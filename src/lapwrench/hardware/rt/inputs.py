@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from lapwrench.drivers.buffer import Sample
+from lapwrench.buffer import Sample
 from lapwrench.hardware.rt.bus import MAX_POINTS, TACTILE_N
 from lapwrench.hardware.shm import SeqlockSlot
 from lapwrench.sensors import InstrumentObservation

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from lapwrench.drivers.buffer import LatestValue
+from lapwrench.buffer import LatestValue
 from lapwrench.hardware.rt.bus import (
     BEAT_CHILD,
     BEAT_DETECTOR,

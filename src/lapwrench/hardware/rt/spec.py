@@ -9,8 +9,8 @@ from typing import Any
 
 from lapwrench.hardware.rt.options import RtOptions
 from lapwrench.hardware.runner import LoopStats, SourceAges
-from lapwrench.hardware.supervisor import SupervisorConfig
-from lapwrench.robot.interface import RobotError
+from lapwrench.robot.errors import RobotError
+from lapwrench.safety.supervisor import SupervisorConfig
 
 
 class RtProcessError(RobotError):

@@ -1,4 +1,7 @@
-"""Latest-value buffers and rate monitoring shared by every sensor driver.
+"""Latest-value buffers and rate monitoring shared by every sensor driver and the loop's sources.
+
+It imports nothing from lapwrench, so both the drivers (world layer) and :mod:`lapwrench.sources`
+(loop layer) can use it.
 
 The 1 kHz control loop must never wait for a sensor. Every driver therefore runs its own reader
 thread that *publishes* into a :class:`LatestValue`; the control loop only *peeks* at the most

@@ -3,7 +3,11 @@
 A robot is driven at its control rate with joint position references, like libfranka's
 ``start_joint_position_control`` with ``readOnce``/``writeOnce``. Each cycle the caller reads the
 state, computes, and writes exactly one command. ``RobotReading`` (see :mod:`lapwrench.sensors`)
-carries q, dq and the estimated external force on the end effector in {B}.
+carries q, dq and the estimated external force on the end effector in {B}. A robot that fails
+raises :class:`~lapwrench.robot.errors.RobotError`.
+
+It lives above :mod:`lapwrench.sensors` (whose readings it returns), in the loop layer, not in
+:mod:`lapwrench.robot`, which the sensors themselves use.
 """
 
 from __future__ import annotations
@@ -13,10 +17,6 @@ from typing import Protocol, runtime_checkable
 from lapwrench.robot.description import RobotKind
 from lapwrench.sensors import RobotReading
 from lapwrench.spatial import Vec
-
-
-class RobotError(RuntimeError):
-    """The robot refused a command, lost the connection or reported a fault."""
 
 
 @runtime_checkable
