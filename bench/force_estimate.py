@@ -26,7 +26,7 @@ import pinocchio as pin
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.loop import TORQUE_BIAS, TORQUE_NOISE
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
-from lapwrench.sim.scene import TAU_MAX
+from lapwrench.sim.scene.arm import TAU_MAX
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 TILT = 0.35  # rad, half-angle of the cone the shaft sweeps

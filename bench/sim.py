@@ -32,7 +32,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 import numpy as np
 
-from lapwrench.sim.scene import SceneConfig, build_scene
+from lapwrench.sim.scene.build import build_scene
+from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 FPS = 25.0

@@ -11,7 +11,7 @@ import pytest
 from lapwrench.robot.model import RobotModel
 
 if TYPE_CHECKING:
-    from lapwrench.sim.scene import Scene
+    from lapwrench.sim.scene.build import Scene
     from lapwrench.sim.world import SimWorld
 
 

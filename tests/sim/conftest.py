@@ -8,7 +8,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import pytest
 
-from lapwrench.sim.scene import Scene, SceneConfig, build_scene
+from lapwrench.sim.scene.build import Scene, build_scene
+from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.world import SimWorld
 
 

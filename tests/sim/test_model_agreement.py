@@ -8,7 +8,9 @@ import pinocchio as pin
 import pytest
 
 from lapwrench.robot.description import ARM_SPECS, FRAME_E, build_urdf
-from lapwrench.sim.scene import SceneConfig, build_arm_spec, build_scene
+from lapwrench.sim.scene.arm import build_arm_spec
+from lapwrench.sim.scene.build import build_scene
+from lapwrench.sim.scene.config import SceneConfig
 
 
 def _full_mass_matrix(m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:

@@ -17,7 +17,7 @@ import pytest
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.loop import TORQUE_BIAS, TORQUE_NOISE
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
-from lapwrench.sim.scene import Scene
+from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 LATERAL_BOUND = 3.0  # N, p95 of |P (F_estimate - F_true)| at 2 rad/s of pivot speed

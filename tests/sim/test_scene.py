@@ -9,16 +9,11 @@ import numpy as np
 import pytest
 from helpers import make_renderable_world
 
-from lapwrench.sim.scene import (
-    CAMERA_NAME,
-    INSTRUMENT_BODIES,
-    CameraIntrinsics,
-    PhantomConfig,
-    Scene,
-    SceneConfig,
-    build_scene,
-    default_initial_configuration,
-)
+from lapwrench.sim.scene.arm import default_initial_configuration
+from lapwrench.sim.scene.build import Scene, build_scene
+from lapwrench.sim.scene.camera import CameraIntrinsics
+from lapwrench.sim.scene.config import PhantomConfig, SceneConfig
+from lapwrench.sim.scene.names import CAMERA_NAME, INSTRUMENT_BODIES
 from lapwrench.sim.world import SimWorld
 
 

@@ -11,11 +11,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from lapwrench.sim.scene import (
-    SceneConfig,
-    _instrument_pose_through_port_numpy,
-    instrument_pose_through_port,
-)
+from lapwrench.sim.scene.config import SceneConfig
+from lapwrench.sim.scene.instruments import _instrument_pose_through_port_numpy, instrument_pose_through_port
 from lapwrench.sim.world import CONTROL_DT, JointServoGains, SimulationUnstableError, SimWorld, _mocap_is_inert
 
 

@@ -85,7 +85,7 @@ def _build_loop(
     ctrl = Controller(cfg)
     if script is not None:
         from lapwrench.sim.robot import SimRobot
-        from lapwrench.sim.scene import SceneConfig
+        from lapwrench.sim.scene.config import SceneConfig
         from lapwrench.sim.world import SimWorld
 
         world = SimWorld(SceneConfig.from_config(cfg))

@@ -62,7 +62,7 @@ class FrameLabeller:
     def __init__(self, world: Any, config: DatasetConfig | None = None) -> None:
         import mujoco
 
-        from lapwrench.sim.scene import CAMERA_NAME, INSTRUMENT_BODIES
+        from lapwrench.sim.scene.names import CAMERA_NAME, INSTRUMENT_BODIES
 
         self._mj = mujoco
         self.world = world

@@ -22,7 +22,8 @@ from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
-from lapwrench.sim.scene import SceneConfig, build_scene
+from lapwrench.sim.scene.build import build_scene
+from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.sensors import (
     SimCamera,
     SimForceTorqueSensor,

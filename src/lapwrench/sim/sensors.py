@@ -27,7 +27,7 @@ import pinocchio as pin
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import ForceTorqueReading, TactileReading
-from lapwrench.sim.scene import FT_FORCE_SENSOR, FT_TORQUE_SENSOR
+from lapwrench.sim.scene.names import FT_FORCE_SENSOR, FT_TORQUE_SENSOR
 from lapwrench.sim.world import SimWorld
 
 

@@ -46,7 +46,11 @@ import numpy as np
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
 from lapwrench.robot.errors import RobotError
-from lapwrench.sim.scene import (
+from lapwrench.sim.scene.arm import TAU_MAX
+from lapwrench.sim.scene.build import Scene, build_scene
+from lapwrench.sim.scene.config import SceneConfig
+from lapwrench.sim.scene.instruments import instrument_pose_through_port
+from lapwrench.sim.scene.names import (
     CAMERA_NAME,
     HOUSING_BODY,
     HOUSING_JOINTS,
@@ -55,13 +59,8 @@ from lapwrench.sim.scene import (
     INSTRUMENT_BODIES,
     INSTRUMENT_TIP_SITES,
     PORT_SITES,
-    TAU_MAX,
     TROCAR_BODY,
     TROCAR_WELD,
-    Scene,
-    SceneConfig,
-    build_scene,
-    instrument_pose_through_port,
 )
 
 CONTROL_DT = 0.001

@@ -43,7 +43,7 @@ def sim_factory(cfg: Any, script: Any, *, realtime: bool = True, q0: Any = None)
     """A :class:`~lapwrench.sim.robot.SimRobot` on the configured scene; a dry-run ``script``'s hand
     force is applied to the handle (on the script's clock, shared with the parent)."""
     from lapwrench.sim.robot import SimRobot
-    from lapwrench.sim.scene import SceneConfig
+    from lapwrench.sim.scene.config import SceneConfig
     from lapwrench.sim.world import SimWorld
 
     world = SimWorld(SceneConfig.from_config(cfg))
