@@ -13,7 +13,8 @@ import pytest
 
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.scene.instruments import _instrument_pose_through_port_numpy, instrument_pose_through_port
-from lapwrench.sim.world import CONTROL_DT, JointServoGains, SimulationUnstableError, SimWorld, _mocap_is_inert
+from lapwrench.sim.world import CONTROL_DT, JointServoGains, SimulationUnstableError, SimWorld
+from lapwrench.sim.world.model_facts import _mocap_is_inert
 
 
 def _run(world: SimWorld, q_ref: np.ndarray, n: int) -> None:
