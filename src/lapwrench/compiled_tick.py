@@ -66,9 +66,20 @@ class _Extra(NamedTuple):
     by_name: dict[str, Vec]
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _f64(x: object) -> Vec:
     """A C-contiguous float64 array (itself when it is one already): the bound argument type."""
+    if type(x) is np.ndarray and x.dtype is _F64 and x.flags.c_contiguous:
+        return x  # the common case (validated readings), checked cheaply
     return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def _points(x: object) -> Mat:
+    """Image points as a C-contiguous float64 (n, 2) array (itself when it is one already)."""
+    a = _f64(x)
+    return a if a.ndim == 2 and a.shape[1] == 2 else a.reshape(-1, 2)
 
 
 _ZERO3 = np.zeros(3)
@@ -105,19 +116,22 @@ class CompiledTick:
         return (
             _ZERO3 if ft is None else _f64(ft.force), _ZERO3 if ft is None else _f64(ft.torque), ft is not None,
             _NO_TACTILE if tactile is None else _f64(tactile.values), tactile is not None,
-            _NO_POINTS if obs is None else _f64(obs.points).reshape(-1, 2),
+            _NO_POINTS if obs is None else _points(obs.points),
         )
 
     def _tick_args(
         self, terms: KinematicTerms, Minv: Mat, inputs: ValidInputs, measured: ScopeAxis, has_measured: bool,
         ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
-        robot = inputs.robot
+        robot, ft, tactile, obs = inputs.robot, inputs.ft, inputs.tactile, inputs.instruments
         ext = None if robot is None else robot.external_force
-        return (
+        return (  # _sensor_args written out: this runs every tick
             terms, Minv, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else _f64(ext), ext is not None,
-            self.feedback.offsets, measured, bool(has_measured), *self._sensor_args(inputs), _f64(ddq_ref),
-            bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
+            self.feedback.offsets, measured, bool(has_measured),
+            _ZERO3 if ft is None else _f64(ft.force), _ZERO3 if ft is None else _f64(ft.torque), ft is not None,
+            _NO_TACTILE if tactile is None else _f64(tactile.values), tactile is not None,
+            _NO_POINTS if obs is None else _points(obs.points),
+            _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
         )
 
     def _geometry_args(
@@ -174,10 +188,12 @@ class CompiledTick:
         vec3, W, ref, at, tau, delta, contacts, has_res, non_finite, admitted, saturated, clamped = self._tick_stage(
             *args
         )
-        wrenches = {"rcm": W[0], "interaction": W[1], "tracking": W[2], "viscous": W[3]}
+        e_R, p_R, p_G, F_lat, residual = vec3  # row views (unpacking is cheaper than indexing)
+        W_r, W_h, W_c, W_f, W_n = W
+        wrenches = {"rcm": W_r, "interaction": W_h, "tracking": W_c, "viscous": W_f}
         return StageResult(
-            vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] if has_res else None, wrenches, W[4], tau, delta, contacts,
-            non_finite, admitted, (ref[0], ref[1], ref[2]) if admitted or saturated else None, clamped, at,
+            e_R, p_R, p_G, F_lat, residual if has_res else None, wrenches, W_n, tau, delta, contacts,
+            non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
         )
 
     def _run_with_extras(

@@ -43,7 +43,7 @@ Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant
 
 
 def _norm(v: Vec) -> float:
-    return math.sqrt(float(v @ v))
+    return math.sqrt(v.dot(v))  # ndarray.dot: the same BLAS dot as ``v @ v``, with less call overhead
 
 
 def classify_mode(handle_engaged: bool, tracking_engaged: bool, handle_force: float, tracking_force: float) -> Mode:
@@ -188,7 +188,8 @@ class Controller:
             raise RuntimeError("call Controller.reset(q0) before tick()")
         # 1. sensors: validate at the edge; kinematics at the reference (the virtual model's state)
         inputs = self.validator.validate(frame)
-        self._report(inputs.events)
+        if inputs.events:
+            self._report(inputs.events)
         ref = self.ref
         terms = self.model.terms(ref.q, ref.dq)
         Minv = self.model.mass_matrix_inverse(terms.q)
@@ -202,42 +203,28 @@ class Controller:
             self._report([InputEvent(frame.time, "controller", "non-finite torque; braking")])
 
         # 7. limits and envelope met by the lower-priority motion only (motion/saturation.py) → command
-        sat = self._saturate(r, frame.time)
-        if r.ref is None:
-            q, dq, ddq, clamped = advance_reference(ref.q, ref.dq, sat.a, self._a_lo, self._a_hi, self.dt)
+        if r.admitted:  # the desired acceleration met every limit: nothing to saturate (the common case)
+            self.infeasible_ticks = 0
+            limits_active: tuple[str, ...] = ()
+            (q, dq, ddq), clamped = r.ref, r.clamped  # type: ignore[misc]
         else:
-            (q, dq, ddq), clamped = r.ref, r.clamped
+            sat = self._saturate(r, frame.time)
+            limits_active = tuple(dict.fromkeys(sat.saturated + sat.dropped))
+            if r.ref is None:
+                q, dq, ddq, clamped = advance_reference(ref.q, ref.dq, sat.a, self._a_lo, self._a_hi, self.dt)
+            else:
+                (q, dq, ddq), clamped = r.ref, r.clamped
         self.shaper.clamped_ticks += bool(clamped)
         self.ref = ReferenceState(q, dq, ddq)
 
-        F_h, F_c = _norm(r.wrenches["interaction"][3:]), _norm(r.wrenches["tracking"][3:])
         e_norm = _norm(r.e_R)
         if e_norm > self.cfg.inputs.max_rcm_error:
             self._report([InputEvent(frame.time, "rcm", f"RCM error {e_norm * 1e3:.1f} mm")])
-        return TickResult(
-            time=frame.time,
-            q_ref=q,
-            dq_ref=dq,
-            ddq_ref=ddq,
-            tau=r.tau,
-            wrenches=r.wrenches,
-            W_n=r.W_n,
-            e_R=r.e_R,
-            p_R=r.p_R,
-            p_G=r.p_G,
-            delta=r.delta,
-            contacts=r.contacts,
-            mode=classify_mode(
-                r.delta > 0.0 and inputs.ft is not None,
-                inputs.instruments is not None and len(inputs.instruments.points) > 0,
-                F_h,
-                F_c,
-            ),
-            residual_lateral=r.residual_lateral,
-            residual=r.residual,
-            limits_active=tuple(dict.fromkeys(sat.saturated + sat.dropped)),
-            rcm_infeasible=self.stopping,
-            events=inputs.events,
+        wrenches = r.wrenches
+        mode = self._mode(r.delta > 0.0 and inputs.ft is not None, inputs.instruments, wrenches)
+        return TickResult(  # positional: the fields in order (cheaper than keywords at 1 kHz)
+            frame.time, q, dq, ddq, r.tau, wrenches, r.W_n, r.e_R, r.p_R, r.p_G, r.delta, r.contacts, mode,
+            r.residual_lateral, r.residual, limits_active, self.stopping, inputs.events,
         )
 
     # -- pieces of the tick -------------------------------------------------------------------
@@ -246,6 +233,15 @@ class Controller:
         for e in events:
             self.events.append(e)
             self.event_counts[e.source] += 1
+
+    @staticmethod
+    def _mode(handle_engaged: bool, instruments: InstrumentObservation | None, wrenches: dict[str, Vec]) -> Mode:
+        """:func:`classify_mode` of this tick; the force norms only when both cues are engaged (the
+        only case that compares them)."""
+        tracking_engaged = instruments is not None and len(instruments.points) > 0
+        if handle_engaged and tracking_engaged:
+            return classify_mode(True, True, _norm(wrenches["interaction"][3:]), _norm(wrenches["tracking"][3:]))
+        return classify_mode(handle_engaged, tracking_engaged, 0.0, 0.0)
 
     def _saturate(self, r: StageResult, t: float) -> SaturationResult:
         """Joint limits and the envelope met by changing the lower-priority motion only (motion/saturation.py).

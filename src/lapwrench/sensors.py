@@ -8,13 +8,12 @@ invalid reaches the command.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lapwrench.config import CameraConfig, InteractionConfig
-from lapwrench.jit import kernel
+from lapwrench.jit import bind, kernel
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec
 
@@ -90,22 +89,28 @@ class ValidInputs:
     events: list[InputEvent] = field(default_factory=list)
 
 
+_F64 = np.dtype(np.float64)
+
+
 def _real_array(x: object) -> np.ndarray | None:
     """``x`` as a C-contiguous float64 array if it holds real numbers (ints or floats; not strings,
     booleans, complex values or objects), else None."""
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
-        return x
+    if type(x) is np.ndarray and x.dtype is _F64 and x.flags.carray:  # C-contiguous, aligned, writeable
+        return x  # the common case, checked cheaply
     try:
         a = np.asarray(x)
     except (TypeError, ValueError):  # ragged nesting, unconvertible objects
         return None
     if a.dtype.kind not in "fiu":
         return None
-    return np.ascontiguousarray(a, dtype=np.float64)
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.aligned else a.copy()  # the compiled checks read aligned memory
 
 
 def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
+    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (n,) and x.flags.carray:
+        return x  # the common case, checked cheaply
     a = _real_array(x)
     return a if a is not None and a.shape == (n,) else None
 
@@ -200,70 +205,87 @@ class InputValidator:
         self._dq_max = np.ascontiguousarray(velocity_factor * limits.velocity, dtype=np.float64)
         self._force_range = float(interaction.force_range)
         self._torque_range = float(interaction.torque_range)
+        # The checks bound to their argument types (C-contiguous float64 arrays, which _vector and
+        # _real_array guarantee, and floats): no numba dispatch per reading.
+        v3, q = np.zeros(3), np.zeros(self._q_lo.shape[0])
+        self._ft_status = bind(ft_status, v3, v3, 0.0, 0.0)
+        self._range_status = bind(range_status, v3, 0.0, 0.0)
+        self._points_status = bind(points_status, np.zeros((1, 2)), 0.0, 0.0)
+        self._joint_status = bind(joint_status, q, q, self._q_lo, self._q_hi, 0.0, self._dq_max)
 
     def validate(self, frame: SensorFrame) -> ValidInputs:
-        out = ValidInputs()
+        """The frame's readings that pass their checks; an :class:`InputEvent` for each one rejected.
+        A valid reading is passed on as it is (the same object) when its arrays already are C-contiguous
+        float64, else rebuilt around converted copies."""
         t = frame.time
+        events: list[InputEvent] = []
+        ft = None if frame.ft is None else self._ft(frame.ft, t, events)
+        tactile = None if frame.tactile is None else self._tactile(frame.tactile, t, events)
+        instruments = None if frame.instruments is None else self._instruments(frame, events)
+        robot = None if frame.robot is None else self._robot(frame.robot, t, events)
+        return ValidInputs(ft, tactile, instruments, robot, events)
 
-        def reject(source: str, message: str) -> None:
-            out.events.append(InputEvent(t, source, message))
+    def _ft(self, r: ForceTorqueReading, t: float, events: list[InputEvent]) -> ForceTorqueReading | None:
+        f, m = _vector(r.force, 3), _vector(r.torque, 3)
+        if f is None or m is None:
+            events.append(InputEvent(t, "ft", "F/T reading must be two 3-vectors"))
+            return None
+        status, nf, nm = self._ft_status(f, m, self._force_range, self._torque_range)
+        if status == NOT_FINITE:
+            events.append(InputEvent(t, "ft", "F/T reading is not finite"))
+        elif status == OUT_OF_RANGE:
+            events.append(InputEvent(t, "ft", f"F/T out of range (|F|={nf:.1f} N, |M|={nm:.2f} N m)"))
+        else:
+            return r if f is r.force and m is r.torque else ForceTorqueReading(f, m, r.stamp)
+        return None
 
-        if frame.ft is not None:
-            f, m = _vector(frame.ft.force, 3), _vector(frame.ft.torque, 3)
-            if f is None or m is None:
-                reject("ft", "F/T reading must be two 3-vectors")
-            else:
-                status, nf, nm = ft_status(f, m, self._force_range, self._torque_range)
-                if status == NOT_FINITE:
-                    reject("ft", "F/T reading is not finite")
-                elif status == OUT_OF_RANGE:
-                    reject("ft", f"F/T out of range (|F|={nf:.1f} N, |M|={nm:.2f} N m)")
-                else:
-                    out.ft = ForceTorqueReading(f, m, frame.ft.stamp)
+    def _tactile(self, r: TactileReading, t: float, events: list[InputEvent]) -> TactileReading | None:
+        v = _vector(r.values, TACTILE_ELEMENTS)
+        if v is None:
+            events.append(InputEvent(t, "tactile", f"tactile reading must have {TACTILE_ELEMENTS} elements"))
+            return None
+        status = self._range_status(v, 0.0, TACTILE_MAX)
+        if status == NOT_FINITE:
+            events.append(InputEvent(t, "tactile", "tactile reading is not finite"))
+        elif status == OUT_OF_RANGE:
+            events.append(InputEvent(t, "tactile", "tactile element outside [0, 255]"))
+        else:
+            return r if v is r.values else TactileReading(v, r.stamp)
+        return None
 
-        if frame.tactile is not None:
-            v = _vector(frame.tactile.values, TACTILE_ELEMENTS)
-            if v is None:
-                reject("tactile", f"tactile reading must have {TACTILE_ELEMENTS} elements")
-            else:
-                status = range_status(v, 0.0, TACTILE_MAX)
-                if status == NOT_FINITE:
-                    reject("tactile", "tactile reading is not finite")
-                elif status == OUT_OF_RANGE:
-                    reject("tactile", "tactile element outside [0, 255]")
-                else:
-                    out.tactile = TactileReading(v, frame.tactile.stamp)
+    def _robot(self, r: RobotReading, t: float, events: list[InputEvent]) -> RobotReading | None:
+        n = self._q_lo.shape[0]
+        q, dq = _vector(r.q, n), _vector(r.dq, n)
+        if q is None or dq is None:
+            events.append(InputEvent(t, "robot", "robot state must hold 7 joint positions and velocities"))
+            return None
+        status = self._joint_status(q, dq, self._q_lo, self._q_hi, self.position_tolerance, self._dq_max)
+        if status == NOT_FINITE:
+            events.append(InputEvent(t, "robot", "robot state is not finite"))
+        elif status == OUTSIDE_LIMITS:
+            events.append(InputEvent(t, "robot", "joint position outside the joint limits"))
+        elif status == TOO_FAST:
+            events.append(InputEvent(t, "robot", "joint velocity beyond the velocity limits"))
+        else:
+            fext = None
+            if r.external_force is not None:
+                fext = _vector(r.external_force, 3)
+                limit = self.max_external_force
+                if fext is None or self._range_status(fext, -limit, limit) or math.sqrt(fext.dot(fext)) > limit:
+                    events.append(InputEvent(t, "external_force", "external force estimate invalid or out of range"))
+                    fext = None
+            if q is r.q and dq is r.dq and fext is r.external_force:
+                return r
+            return RobotReading(q, dq, fext, r.stamp)
+        return None
 
-        if frame.instruments is not None:
-            out.instruments = self._instruments(frame, reject)
-
-        if frame.robot is not None:
-            q, dq = _vector(frame.robot.q, 7), _vector(frame.robot.dq, 7)
-            if q is None or dq is None:
-                reject("robot", "robot state must hold 7 joint positions and velocities")
-                return out
-            status = joint_status(q, dq, self._q_lo, self._q_hi, self.position_tolerance, self._dq_max)
-            if status == NOT_FINITE:
-                reject("robot", "robot state is not finite")
-            elif status == OUTSIDE_LIMITS:
-                reject("robot", "joint position outside the joint limits")
-            elif status == TOO_FAST:
-                reject("robot", "joint velocity beyond the velocity limits")
-            else:
-                fext = None
-                if frame.robot.external_force is not None:
-                    fext = _vector(frame.robot.external_force, 3)
-                    if fext is None or range_status(fext, -self.max_external_force, self.max_external_force) or (
-                        math.sqrt(fext @ fext) > self.max_external_force
-                    ):
-                        reject("external_force", "external force estimate invalid or out of range")
-                        fext = None
-                out.robot = RobotReading(q, dq, fext, frame.robot.stamp)
-        return out
-
-    def _instruments(self, frame: SensorFrame, reject: Callable[[str, str], None]) -> InstrumentObservation | None:
+    def _instruments(self, frame: SensorFrame, events: list[InputEvent]) -> InstrumentObservation | None:
         assert frame.instruments is not None
         cam = self.camera
+
+        def reject(source: str, message: str) -> None:
+            events.append(InputEvent(frame.time, source, message))
+
         pts = _real_array(frame.instruments.points)
         if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
             reject("instruments", "image points must be (n, 2) real numbers")
@@ -273,7 +295,7 @@ class InputValidator:
             n, most = len(pts), self.max_instruments
             reject("instruments", f"{n} detections in one frame (at most {most}): a detector fault")
             return None
-        status = points_status(pts, float(cam.width), float(cam.height))
+        status = self._points_status(pts, float(cam.width), float(cam.height))
         if status == NOT_FINITE:
             reject("instruments", "image point is not finite")
         elif status == OUT_OF_RANGE:
@@ -281,5 +303,6 @@ class InputValidator:
         elif not _fresh(frame.instruments.stamp, frame.time, self.max_image_age):
             reject("instruments", f"detection older than {self.max_image_age} s")
         else:
-            return InstrumentObservation(pts, frame.instruments.stamp)
+            obs = frame.instruments
+            return obs if pts is obs.points else InstrumentObservation(pts, obs.stamp)
         return None

@@ -75,10 +75,11 @@ class MeasuredFeedback:
         self.offsets[:] = 0.0
 
     def measured_axis(self, q_measured: Vec | None) -> tuple[ScopeAxis, bool]:
-        """The scope axis at the measured joints (Pinocchio), or a placeholder and False when there is none."""
+        """The scope axis at the measured joints (Pinocchio), or a placeholder and False when there is none.
+        The axis is the model's own arrays (:meth:`RobotModel.scope_axis_into`): valid until its next call."""
         if q_measured is None:
             return NO_AXIS, False
-        return self.model.scope_axis_at(q_measured), True
+        return self.model.scope_axis_into(q_measured), True
 
     def update(self, q_measured: Vec | None, kin: Kinematics, p_R: Vec, e_R: Vec) -> None:
         """One filter step; ``None`` (no valid measurement) lets the offsets decay to zero."""
