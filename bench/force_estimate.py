@@ -99,7 +99,7 @@ def run(omega: float, seconds: float) -> dict[str, dict[str, float]]:
             for r in robots.values():
                 r.read()
             continue
-        truth = world.contact_force() + world.hand_wrench()[:3]
+        truth = world.contact_force() + world.hand_force()
         kin = model.kinematics(world.q, world.dq)
         speed.append(float(np.linalg.norm(kin.P @ kin.twist_E[:3])))
         truth_norm.append(float(np.linalg.norm(truth)))

@@ -53,7 +53,7 @@ class Physics:
         self.world = SimWorld(build_scene(SceneConfig(kind=kind)))
         self.world.render()  # create the GL context outside the timed loop
         self.render = render
-        self.world.set_hand_wrench(np.array([2.0, -1.0, 0.0, 0.0, 0.0, 0.05]))
+        self.world.set_hand_wrench(force=[2.0, -1.0, 0.0], torque=[0.0, 0.0, 0.05])
         self.i = 0
         self.frames = 0
         self.step_times: list[float] = []
@@ -106,7 +106,7 @@ class SimSide:
         for k in range(n):
             t = self.i * CONTROL_DT
             self.i += 1
-            w.set_hand_wrench(np.array([1.0 * np.sin(t), 0.5, 0.0, 0.0, 0.0, 0.0]))
+            w.set_hand_wrench(force=np.array([1.0 * np.sin(t), 0.5, 0.0]))
             if camera is not None:
                 camera.capture(t)
             robot.read()
@@ -138,7 +138,7 @@ class Closed:
         loop = self.loop
         t_start = time.perf_counter()
         for _ in range(n):
-            loop.world.set_hand_wrench(np.array([1.0 * np.sin(self.i * 1e-3), 0.5, 0.0, 0.0, 0.0, 0.0]))
+            loop.world.set_hand_wrench(force=np.array([1.0 * np.sin(self.i * 1e-3), 0.5, 0.0]))
             self.i += 1
             loop.step(30.0)
         return time.perf_counter() - t_start

@@ -16,6 +16,7 @@ import numpy as np
 from lapwrench.config import CameraConfig, Config
 from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
+from lapwrench.rcm.geometry import closest_point
 from lapwrench.robot.description import RobotKind
 from lapwrench.robot.limits import limit_usage
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
@@ -152,7 +153,8 @@ def run_virtual(
         log.t.append(c.frame.time)
         log.results.append(c.result)
         log.pixels.append(pixels[0])
-        log.axis_points.append((kin.p_E.copy(), kin.p_E + cfg.scope.length * kin.d_z))
+        tip, _ = closest_point(kin, 1.0, cfg.scope.length)  # eq (31) at s* = 1: the scope tip
+        log.axis_points.append((kin.p_E.copy(), tip))
         if progress is not None:
             progress(k, steps)
     return ctrl, log

@@ -7,6 +7,7 @@ import pytest
 
 from lapwrench.config import Config, load
 from lapwrench.controller import Controller
+from lapwrench.rcm.geometry import initial_rcm_point
 from lapwrench.virtual import DEFAULT_Q0, HandScript, limits_report, run_virtual
 
 
@@ -119,7 +120,8 @@ def test_the_supervisor_holds_a_virtual_run_that_starts_beyond_its_rcm_bound() -
     ctrl = Controller(cfg)
     ctrl.reset(DEFAULT_Q0)
     kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
-    p_R = kin.p_E + 0.232 * kin.d_z + 0.006 * kin.R_E[:, 0]  # 6 mm off: beyond safety.max_rcm_error
+    p_R0 = initial_rcm_point(kin, cfg.scope.length, cfg.scope.lambda0)
+    p_R = p_R0 + 0.006 * kin.R_E[:, 0]  # 6 mm off: beyond safety.max_rcm_error
     _, log = run_virtual(cfg, 1.0, p_R=p_R, controller=ctrl)
     assert log.alarm is not None and log.alarm.startswith("rcm_error"), log.alarm
     assert len(log.results) < 10

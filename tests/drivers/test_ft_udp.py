@@ -85,7 +85,6 @@ def test_hex_scaling_defaults(device: FakeFTDevice) -> None:
         np.testing.assert_allclose(w.torque, [1.0, -2.5, 0.0])
         assert w.force.shape == (3,) and w.torque.shape == (3,)
         assert not w.force.flags.writeable
-        np.testing.assert_allclose(w.as_array(), [1.0, -2.0, 0.5, 1.0, -2.5, 0.0])
     assert (CMD_START_REALTIME, 0) in device.commands
 
 
@@ -111,9 +110,12 @@ def test_hex_tare_removes_offset(device: FakeFTDevice) -> None:
     device.counts = offset
     with OnRobotHexSensor(*device.address) as s:
         bias = s.tare(n_samples=20, timeout=2.0)
-        np.testing.assert_allclose(bias, offset / [1e4, 1e4, 1e4, 1e5, 1e5, 1e5])
+        np.testing.assert_allclose(bias.force, offset[:3] / 1e4)  # counts in WIRE_ORDER: force first
+        np.testing.assert_allclose(bias.torque, offset[3:] / 1e5)
+        np.testing.assert_allclose(s.bias.torque, bias.torque)
         w = s.buffer.wait_newer(s.latest().seq, timeout=2.0).value
-        np.testing.assert_allclose(w.as_array(), 0.0, atol=1e-12)
+        np.testing.assert_allclose(w.force, 0.0, atol=1e-12)
+        np.testing.assert_allclose(w.torque, 0.0, atol=1e-12)
         device.counts = offset + np.array([10000, 0, 0, 0, 0, 100000])  # surgeon pushes 1 N, 1 Nm
         assert wait_until(lambda: abs(s.latest().value.force[0] - 1.0) < 1e-9)
         np.testing.assert_allclose(s.latest().value.torque, [0, 0, 1.0], atol=1e-12)
@@ -126,7 +128,7 @@ def test_tare_averages_noisy_samples(device: FakeFTDevice) -> None:
     device.counts_fn = lambda i: [5000 + (1000 if i % 2 else -1000), 0, 0, 0, 0, 0]
     with OnRobotHexSensor(*device.address) as s:
         bias = s.tare(n_samples=40, timeout=2.0)
-        assert bias[0] == pytest.approx(0.5, abs=0.1 / 40 + 1e-9)
+        assert bias.force[0] == pytest.approx(0.5, abs=0.1 / 40 + 1e-9)
 
 
 def test_tare_requires_running_source(device: FakeFTDevice) -> None:
@@ -279,7 +281,10 @@ def test_constructor_validation() -> None:
         OnRobotHexSensor("127.0.0.1", 1, rate_hz=5000)
     s = OnRobotHexSensor("127.0.0.1", 1)
     with pytest.raises(ValueError):
-        s.set_bias([np.nan, 0, 0, 0, 0, 0])
+        s.set_bias(force=[np.nan, 0, 0], torque=np.zeros(3))
+    s.set_bias(force=[1.0, 2.0, 3.0], torque=[0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(s.bias.force, [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(s.bias.torque, [0.1, 0.2, 0.3])
 
 
 def test_control_loop_reads_never_block_while_streaming(device: FakeFTDevice) -> None:
@@ -391,10 +396,12 @@ def test_polled_tare_drains_by_itself(device: FakeFTDevice) -> None:
     s = OnRobotHexSensor(*device.address).start_polled()
     try:
         bias = s.tare(n_samples=20, timeout=2.0)
-        np.testing.assert_allclose(bias, device.counts / [1e4, 1e4, 1e4, 1e5, 1e5, 1e5])
+        np.testing.assert_allclose(bias.force, device.counts[:3] / 1e4)
+        np.testing.assert_allclose(bias.torque, device.counts[3:] / 1e5)
         time.sleep(0.02)
         s.drain()
-        np.testing.assert_allclose(s.latest().value.as_array(), 0.0, atol=1e-12)
+        np.testing.assert_allclose(s.latest().value.force, 0.0, atol=1e-12)
+        np.testing.assert_allclose(s.latest().value.torque, 0.0, atol=1e-12)
     finally:
         s.stop()
 

@@ -43,6 +43,7 @@ from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
+from lapwrench.safety.supervisor import measure_scope
 
 
 def hand_force(t: float) -> np.ndarray:
@@ -55,10 +56,8 @@ def hand_force(t: float) -> np.ndarray:
 
 
 def axis_distance(model: RobotModel, q: np.ndarray, p_R: np.ndarray) -> float:
-    pose = model.frame_pose(q, "lap_E")
-    d = pose.rotation[:, 2]
-    r = p_R - pose.translation
-    return float(np.linalg.norm(r - (r @ d) * d))
+    """Distance (m) from p_R to the scope axis at joints q: the supervisor's measured |e_R| (eq 27)."""
+    return measure_scope(model, q, p_R).rcm_error
 
 
 def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:

@@ -178,7 +178,7 @@ def test_sim_robot_estimates_the_hand_force_from_joint_torques(sim_world: Any) -
     for _ in range(400):
         r = robot.read()
         robot.command(r.q * 0 + sim_world.q_ref)
-    truth = sim_world.hand_wrench()[:3] + sim_world.contact_force()
+    truth = sim_world.hand_force() + sim_world.contact_force()
     assert np.linalg.norm(r.external_force - truth) < 0.5
     biased = SimRobot(sim_world, estimate=ForceEstimateConfig(torque_bias=0.5, torque_noise=0.05, seed=1))
     r2 = biased.connect()

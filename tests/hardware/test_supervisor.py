@@ -7,6 +7,7 @@ import pytest
 
 from lapwrench.config import load
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
+from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState, measure_scope
@@ -267,6 +268,21 @@ def test_measure_scope_at_the_measured_joints() -> None:
     assert np.isnan(bad.rcm_error) and np.isnan(bad.depth)
     assert np.isnan(measure_scope(model, DEFAULT_Q0, np.array([np.nan, 0.0, 0.0])).rcm_error)
     assert np.isnan(measure_scope(model, np.zeros(6), np.zeros(3)).depth)
+
+
+def test_measured_scope_is_the_ticks_geometry_at_the_measured_joints() -> None:
+    """The supervisor's measured RCM error and depth (its own forward kinematics pass) equal eq (27)'s
+    |e_R| and the depth of :mod:`lapwrench.rcm.geometry` on the tick's kinematics at the same joints."""
+    model = RobotModel("panda")
+    L = model.length
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        q = DEFAULT_Q0 + rng.uniform(-0.3, 0.3, 7)
+        kin = model.kinematics(q, rng.normal(size=7))
+        p_R = initial_rcm_point(kin, L, 0.8) + rng.normal(scale=0.005, size=3)
+        m = measure_scope(model, q, p_R)
+        assert m.rcm_error == pytest.approx(np.linalg.norm(rcm_error(kin, p_R)), abs=1e-12)
+        assert m.depth == pytest.approx(insertion_depth(kin, p_R, L), abs=1e-12)
 
 
 def test_a_braking_controller_is_followed_to_rest_then_held_with_an_alarm(limits) -> None:

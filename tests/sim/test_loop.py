@@ -67,7 +67,7 @@ def test_supervisor_holds_on_measured_insertion_depth() -> None:
 def test_exception_in_the_controller_tick_stops_at_rest_with_an_alarm(monkeypatch: pytest.MonkeyPatch) -> None:
     loop = ClosedLoop(load())
     sent = recording(loop)
-    loop.world.set_hand_wrench(np.array([0.0, 8.0, 0.0, 0.0, 0.0, 0.0]))  # hand-guided: the arm moves
+    loop.world.set_hand_wrench(force=[0.0, 8.0, 0.0])  # hand-guided: the arm moves
     for _ in range(400):
         loop.step(30.0)
     assert np.max(np.abs(loop.supervisor.command_state[1])) > 1e-3
@@ -101,7 +101,7 @@ def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_superviso
     ctrl.bounds_hook = frozen
     with pytest.raises(SafetyStopError) as stop:
         for _ in range(3000):
-            loop.world.set_hand_wrench(np.r_[push, 0.0, 0.0, 0.0])
+            loop.world.set_hand_wrench(force=push)
             loop.step(grip_force=30.0)
     assert str(stop.value.reason).startswith("rcm_infeasible"), stop.value.reason
     assert ctrl.stopping

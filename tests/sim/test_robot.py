@@ -56,7 +56,7 @@ def _cone_pivot(
         robots["tick_mean"].command(q)
         readings = {name: r.read().external_force for name, r in robots.items()}
         if t > ramp:
-            truth = world.contact_force() + world.hand_wrench()[:3]
+            truth = world.contact_force() + world.hand_force()
             now = model.kinematics(world.q, world.dq)
             yield (
                 float(np.linalg.norm(now.P @ now.twist_E[:3])),
@@ -101,7 +101,7 @@ def test_reading_uses_the_observer_on_the_measured_torques(panda_scene: Scene) -
     ref = ExternalForceObserver(robot.model, robot.est.observer_gain, robot.est.damping)
     r = robot.connect()
     f_ref = ref.update_reference(r.q, r.dq, robot.tau_J, CONTROL_DT)
-    world.set_hand_wrench(np.array([4.0, 2.0, -1.0, 0.0, 0.0, 0.0]))
+    world.set_hand_wrench(force=[4.0, 2.0, -1.0])
     for k in range(300):
         robot.command(world.scene.q0 + 0.03 * np.sin(k * 0.02))
         r = robot.read()

@@ -37,14 +37,14 @@ def test_ft_sensor_measures_only_the_hand(world: SimWorld) -> None:
     _hold(world, 300)
     ft.tare()
     assert np.linalg.norm(world.contact_force()) > 5.0
-    hand = np.array([3.0, -2.0, 1.0, 0.05, -0.02, 0.1])
-    world.set_hand_wrench(hand)
+    force, torque = np.array([3.0, -2.0, 1.0]), np.array([0.05, -0.02, 0.1])
+    world.set_hand_wrench(force=force, torque=torque)
     _hold(world, 50)
     r = ft.read(1.0)
     _, R_H = world.frame_pose("lap_H")
-    np.testing.assert_allclose(R_H @ r.force, hand[:3], atol=1e-6)
-    np.testing.assert_allclose(R_H @ r.torque, hand[3:], atol=1e-6)
-    world.set_hand_wrench(np.zeros(6))
+    np.testing.assert_allclose(R_H @ r.force, force, atol=1e-6)
+    np.testing.assert_allclose(R_H @ r.torque, torque, atol=1e-6)
+    world.set_hand_wrench()
     world.set_housing_load(np.zeros(3))
 
 
@@ -85,7 +85,7 @@ def test_force_estimate_includes_the_trocar_and_carries_torque_sensor_errors(wor
     for _ in range(600):
         clean.command(world.scene.q0)
         r = clean.read()
-    truth = world.contact_force() + world.hand_wrench()[:3]
+    truth = world.contact_force() + world.hand_force()
     assert np.linalg.norm(truth) > 5.0
     np.testing.assert_allclose(r.external_force, truth, atol=0.3)
     noisy = SimRobot(world, estimate=ForceEstimateConfig(torque_noise=0.05, torque_bias=0.2, seed=2))
@@ -130,7 +130,7 @@ def test_ft_reading_is_the_documented_formula(world: SimWorld) -> None:
     """Six cached sensordata addresses and one draw of six normals: the same values, bit for bit, as
     the sensors' force and torque read by name with a draw of three per part."""
     world.reset()
-    world.set_hand_wrench(np.array([3.0, -2.0, 1.0, 0.05, -0.02, 0.1]))
+    world.set_hand_wrench(force=[3.0, -2.0, 1.0], torque=[0.05, -0.02, 0.1])
     _hold(world, 20)
     noise = ForceTorqueNoise()
     ft = SimForceTorqueSensor(world, noise, seed=5)
@@ -143,7 +143,7 @@ def test_ft_reading_is_the_documented_formula(world: SimWorld) -> None:
         expected[3:] += np.asarray(noise.torque_bias) + noise.torque_sigma * rng.standard_normal(3)
         np.testing.assert_array_equal(ft._raw(), expected)
         _hold(world, 1)
-    world.set_hand_wrench(np.zeros(6))
+    world.set_hand_wrench()
 
 
 def test_tactile_values_are_the_documented_formula() -> None:

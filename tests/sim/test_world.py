@@ -11,6 +11,9 @@ import mujoco
 import numpy as np
 import pytest
 
+from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
+from lapwrench.robot.model import RobotModel
+from lapwrench.sim.scene.build import incision_position_for
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.scene.instruments import _instrument_pose_through_port_numpy, instrument_pose_through_port
 from lapwrench.sim.world import CONTROL_DT, JointServoGains, SimulationUnstableError, SimWorld
@@ -103,8 +106,8 @@ def test_contact_force_is_smooth_under_moving_load(world: SimWorld) -> None:
 def test_external_torque_matches_loads(world: SimWorld) -> None:
     """tau_ext = J_H^T w_hand + J_c^T F_contact, and M ddq + c + g = tau_J + tau_ext (rigid model)."""
     q0 = world.scene.q0
-    w_hand = np.array([3.0, -2.0, 1.0, 0.05, -0.1, 0.08])
-    world.set_hand_wrench(w_hand)
+    f_hand, tau_hand = np.array([3.0, -2.0, 1.0]), np.array([0.05, -0.1, 0.08])
+    world.set_hand_wrench(force=f_hand, torque=tau_hand)
     world.set_housing_load(np.array([10.0, 5.0, 0.0]))
     _run(world, q0, 300)
     m, d = world.model, world.data
@@ -112,7 +115,7 @@ def test_external_torque_matches_loads(world: SimWorld) -> None:
     jp = np.zeros((3, m.nv))
     jr = np.zeros((3, m.nv))
     mujoco.mj_jacBody(m, d, jp, jr, m.body("lap_H").id)
-    expected = np.vstack([jp, jr])[:, v].T @ w_hand
+    expected = jp[:, v].T @ f_hand + jr[:, v].T @ tau_hand
     f_c = world.contact_force()
     assert np.linalg.norm(f_c) > 0.5
     jc = np.zeros((3, m.nv))
@@ -126,7 +129,8 @@ def test_external_torque_matches_loads(world: SimWorld) -> None:
     M_arm = M[np.ix_(v, v)] - np.diag(m.dof_armature[v])
     lhs = M_arm @ d.qacc[v] + d.qfrc_bias[v]
     np.testing.assert_allclose(lhs, world.joint_torque_measured() + world.external_torque(), atol=1e-6)
-    np.testing.assert_allclose(world.hand_wrench(), w_hand)
+    np.testing.assert_allclose(world.hand_force(), f_hand)
+    np.testing.assert_allclose(world.hand_torque(), tau_hand)
 
 
 def test_hand_push_and_disturbance_stay_stable_fr3() -> None:
@@ -136,7 +140,7 @@ def test_hand_push_and_disturbance_stay_stable_fr3() -> None:
     peak = 0.0
     for i in range(2000):
         if i == 200:
-            w.set_hand_wrench(np.array([0.0, 8.0, 0.0, 0.0, 0.0, 0.3]))
+            w.set_hand_wrench(force=[0.0, 8.0, 0.0], torque=[0.0, 0.0, 0.3])
         if i == 800:
             w.set_housing_load(np.array([35.0, 0.0, 0.0]))
         w.step(q0)
@@ -144,6 +148,28 @@ def test_hand_push_and_disturbance_stay_stable_fr3() -> None:
     assert np.all(np.isfinite(w.q))
     assert 5.0 < peak < 60.0
     assert np.linalg.norm(w.housing_displacement()) > 0.008
+
+
+def test_ground_truth_is_the_controllers_geometry_at_the_simulated_pose(world: SimWorld) -> None:
+    """The simulator's RCM error and tip depth (:meth:`SimWorld.axis_offset`) are eq (27) and the
+    depth of :mod:`lapwrench.rcm.geometry` on the controller model's scope axis at the world's joints,
+    and the incision starts at eq (18)'s p_R(t0): MuJoCo and Pinocchio agree on lap_E."""
+    cfg = world.scene.config
+    model = RobotModel(cfg.kind)
+    assert model.length == cfg.scope.length
+    kin0 = model.kinematics(world.scene.q0, np.zeros(7))
+    np.testing.assert_allclose(
+        incision_position_for(cfg), initial_rcm_point(kin0, cfg.scope.length, cfg.rcm_lambda0), atol=1e-9
+    )
+    _run(world, world.scene.q0 + np.array([0.05, -0.03, 0.04, 0.02, -0.05, 0.03, 0.2]), 200)
+    kin = model.kinematics(world.q, np.zeros(7))
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        p = world.incision_rest_position() + rng.normal(scale=0.01, size=3)
+        e, depth = world.axis_offset(p)
+        assert e == pytest.approx(np.linalg.norm(rcm_error(kin, p)), abs=1e-9)
+        assert depth == pytest.approx(insertion_depth(kin, p, cfg.scope.length), abs=1e-9)
+    assert world.rcm_error() == world.axis_offset(world.incision_position())[0]
 
 
 def test_instruments_pass_through_ports(world: SimWorld) -> None:
@@ -191,8 +217,12 @@ def test_instability_detector_fires_on_contact_blowup(panda_scene) -> None:
 def test_bad_inputs_raise(world: SimWorld) -> None:
     with pytest.raises(SimulationUnstableError, match="q_ref"):
         world.step(np.full(7, np.nan))
-    with pytest.raises(ValueError, match="hand wrench"):
-        world.set_hand_wrench(np.zeros(5))
+    with pytest.raises(ValueError, match="hand force"):
+        world.set_hand_wrench(force=np.zeros(5))
+    with pytest.raises(ValueError, match="hand torque"):
+        world.set_hand_wrench(force=np.zeros(3), torque=[0.0, np.nan, 0.0])
+    with pytest.raises(TypeError):
+        world.set_hand_wrench(np.zeros(6))  # type: ignore[misc]  # no unnamed 6-vector: force and torque by name
     with pytest.raises(ValueError, match="housing load"):
         world.set_housing_load(np.array([np.inf, 0.0, 0.0]))
 
@@ -262,7 +292,7 @@ def _script(world: SimWorld, i: int) -> tuple[np.ndarray, np.ndarray | None]:
     """Scripted loads and references of tick ``i`` (instrument moved, hand and housing loads, dq_ref)."""
     t = (i + 1) * CONTROL_DT
     if i == 100:
-        world.set_hand_wrench(np.array([4.0, -2.0, 1.0, 0.0, 0.05, 0.1]))
+        world.set_hand_wrench(force=[4.0, -2.0, 1.0], torque=[0.0, 0.05, 0.1])
     if i == 250:
         world.set_housing_load(world.housing_load_for_shift(np.array([0.004, -0.003])))
     if i % 3 == 0:
@@ -309,7 +339,7 @@ def test_first_substep_reuses_the_closing_forward_only_when_the_state_is_unchang
         world.step(q0)
     assert calls["mj_step2"] == 5
     world.set_instrument_tip(0, world.port_position(0) + np.array([0.0, 0.02, -0.1]))  # inert mocap
-    world.set_hand_wrench(np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]))  # acts in mj_step2 anyway
+    world.set_hand_wrench(force=[1.0, 0.0, 0.0])  # acts in mj_step2 anyway
     world.step(q0)
     assert calls["mj_step2"] == 6
     world.data.qvel[world.scene.arm_dof_adr[2]] += 1e-3  # the caller moved the state: full mj_step
@@ -347,7 +377,7 @@ def test_mocap_inertness() -> None:
 
 def test_cached_ids_and_views_read_what_fresh_lookups_read(world: SimWorld) -> None:
     q0 = world.scene.q0
-    world.set_hand_wrench(np.array([2.0, 1.0, -1.0, 0.0, 0.0, 0.02]))
+    world.set_hand_wrench(force=[2.0, 1.0, -1.0], torque=[0.0, 0.0, 0.02])
     for i in range(50):
         world.step(q0 + 0.01 * np.sin(i * 0.1))
     m, d = world.model, world.data
@@ -368,7 +398,9 @@ def test_cached_ids_and_views_read_what_fresh_lookups_read(world: SimWorld) -> N
     np.testing.assert_array_equal(dz, d.xmat[m.body("lap_E").id].reshape(3, 3)[:, 2])
     np.testing.assert_array_equal(world.incision_position(), d.xpos[m.body("incision").id])
     np.testing.assert_array_equal(world.contact_force(), _plain_contact_force(world))
-    np.testing.assert_array_equal(world.hand_wrench(), d.xfrc_applied[m.body("lap_H").id])
+    xfrc_H = d.xfrc_applied[m.body("lap_H").id]  # MuJoCo's row: [force; torque]
+    np.testing.assert_array_equal(world.hand_force(), xfrc_H[:3])
+    np.testing.assert_array_equal(world.hand_torque(), xfrc_H[3:])
     np.testing.assert_array_equal(world.port_position(1), d.site_xpos[m.site("port_right").id])
     d.eq_active[0] = 0  # no weld rows: no force
     mujoco.mj_forward(m, d)
@@ -419,7 +451,7 @@ from lapwrench.sim.world import SimWorld
 w = SimWorld()
 r = SimRobot(w, estimate=ForceEstimateConfig(torque_noise=0.05, torque_bias=0.1, seed=3))
 r.connect()
-w.set_hand_wrench(np.array([3.0, -1.0, 0.5, 0.0, 0.0, 0.0]))
+w.set_hand_wrench(force=np.array([3.0, -1.0, 0.5]))
 out = []
 for i in range(150):
     if i % 5 == 0:

@@ -45,7 +45,10 @@ Scaling assumptions (configurable, check them against your device)
 
 Output
 ------
-Each accepted record is published as a :class:`Wrench` (force (3,) N, torque (3,) N·m, sensor
+Inside this module the six values travel in the record's order, :data:`WIRE_ORDER`
+``[Fx, Fy, Fz, Tx, Ty, Tz]`` (force first, unlike lapwrench's ``[moment; force]`` wrenches of
+:mod:`lapwrench.spatial`). Nothing leaves the driver in that order: each accepted record is
+published as a :class:`Wrench` with named parts (force (3,) N, torque (3,) N·m, sensor
 frame, bias removed) in a :class:`~lapwrench.buffer.LatestValue`; the sample timestamp is
 the host ``time.monotonic()`` at reception. Malformed datagrams (wrong length, a request header
 where a record is expected, non-zero status) raise :class:`~lapwrench.drivers.base.PacketError`
@@ -82,6 +85,7 @@ __all__ = [
     "RDT_HEADER",
     "RECORD_SIZE",
     "REQUEST_SIZE",
+    "WIRE_ORDER",
     "AtiNetFTSensor",
     "FTRecord",
     "OnRobotHexSensor",
@@ -92,6 +96,7 @@ __all__ = [
     "pack_request",
     "unpack_record",
     "unpack_request",
+    "wire_counts",
 ]
 
 DEFAULT_PORT = 49152
@@ -101,6 +106,10 @@ CMD_START_REALTIME = 0x0002
 CMD_BIAS = 0x0042
 CMD_SET_FILTER = 0x0081
 CMD_SET_SPEED = 0x0082
+
+WIRE_ORDER: tuple[str, ...] = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+"""Order of the six values of a record (force, then torque) and of this module's internal 6-arrays
+(scale, bias, tare samples). Only named force/torque pairs (:class:`Wrench`) leave the driver."""
 
 _REQUEST = struct.Struct(">HHI")
 _RECORD = struct.Struct(">III6i")
@@ -124,7 +133,7 @@ class FTRecord:
 
 @dataclass(frozen=True, slots=True)
 class Wrench:
-    """A force/torque measurement in the sensor frame, bias removed.
+    """A force/torque measurement in the sensor frame, bias removed (or a bias, :meth:`UdpForceTorqueSensor.tare`).
 
     Attributes:
         force: (3,) N, read-only.
@@ -138,9 +147,20 @@ class Wrench:
     ft_sequence: int = 0
     status: int = 0
 
-    def as_array(self) -> NDArray[np.float64]:
-        """The wrench as a new (6,) array ``[Fx, Fy, Fz, Tx, Ty, Tz]``."""
-        return np.concatenate((self.force, self.torque))
+
+def _named(w: NDArray[np.float64]) -> Wrench:
+    """A (6,) array in :data:`WIRE_ORDER` as a :class:`Wrench` (views of ``w``)."""
+    return Wrench(w[:3], w[3:])
+
+
+def wire_counts(
+    force: ArrayLike, torque: ArrayLike = (0.0, 0.0, 0.0), *, counts_per_force: float, counts_per_torque: float
+) -> NDArray[np.float64]:
+    """The six raw counts (rounded, :data:`WIRE_ORDER`) a device sends for ``force`` (N) and
+    ``torque`` (N·m): what a simulated device streams (e.g. :class:`~lapwrench.drivers.fakes.FakeFTDevice`)."""
+    f = np.asarray(force, dtype=np.float64).reshape(3) * counts_per_force
+    m = np.asarray(torque, dtype=np.float64).reshape(3) * counts_per_torque
+    return np.concatenate((f, m)).round()
 
 
 def pack_request(command: int, sample_count: int = 0, header: int = RDT_HEADER) -> bytes:
@@ -351,7 +371,7 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
 
     def _accept_datagram(self, data: bytes) -> tuple[NDArray[np.float64], FTRecord] | None:
         """Decode and check one datagram (sequence, status, tare); the raw wrench (N, N·m, bias
-        not removed) and its record, or ``None`` for a duplicate/out-of-order record.
+        not removed, :data:`WIRE_ORDER`) and its record, or ``None`` for a duplicate/out-of-order record.
 
         Raises:
             PacketError: malformed datagram or (:class:`StatusError`) a device status error.
@@ -482,27 +502,31 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
 
     # ----------------------------------------------------------------- bias / tare
     @property
-    def bias(self) -> NDArray[np.float64]:
-        """Current software bias (6,) in N / N·m, subtracted from every sample (a copy)."""
-        return self._bias.copy()
+    def bias(self) -> Wrench:
+        """Current software bias (force N, torque N·m; copies), subtracted from every sample."""
+        return _named(self._bias.copy())
 
-    def set_bias(self, bias: ArrayLike) -> None:
-        """Set the software bias ``[Fx, Fy, Fz, Tx, Ty, Tz]`` in N / N·m."""
-        b = np.asarray(bias, dtype=np.float64).reshape(6).copy()
-        if not np.all(np.isfinite(b)):
+    def set_bias(self, *, force: ArrayLike, torque: ArrayLike) -> None:
+        """Set the software bias: ``force`` (3,) N and ``torque`` (3,) N·m, sensor frame."""
+        f, m = np.asarray(force, dtype=np.float64).reshape(3), np.asarray(torque, dtype=np.float64).reshape(3)
+        self._set_bias(np.concatenate((f, m)))  # WIRE_ORDER
+
+    def _set_bias(self, bias: NDArray[np.float64]) -> None:
+        """Set the software bias from a (6,) array in :data:`WIRE_ORDER`."""
+        if not np.all(np.isfinite(bias)):
             raise ValueError("bias must be finite")
-        self._bias = b  # atomic reference swap, read by the reader thread
+        self._bias = bias  # atomic reference swap, read by the reader thread
 
     def clear_bias(self) -> None:
         """Remove the software bias."""
-        self.set_bias(np.zeros(6))
+        self._set_bias(np.zeros(6))
 
-    def tare(self, n_samples: int = 100, timeout: float = 2.0) -> NDArray[np.float64]:
+    def tare(self, n_samples: int = 100, timeout: float = 2.0) -> Wrench:
         """Average the next ``n_samples`` raw records and use the mean as the software bias.
 
         Blocks the caller (never the reader thread) for up to ``timeout`` s; in polled mode
         (:meth:`start_polled`) it drains the socket itself meanwhile. Call it while the handle is
-        not touched. Returns the new bias (6,).
+        not touched. Returns the new bias (:attr:`bias`).
 
         Raises:
             RuntimeError: the source is not running.
@@ -528,8 +552,8 @@ class UdpForceTorqueSensor(StreamingSource[Wrench]):
         finally:
             self._tare = None
         bias = np.mean(np.stack(collector.samples[:n_samples]), axis=0)
-        self.set_bias(bias)
-        return bias.copy()
+        self._set_bias(bias)
+        return _named(bias.copy())
 
 
 class OnRobotHexSensor(UdpForceTorqueSensor):

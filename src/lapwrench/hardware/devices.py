@@ -19,6 +19,8 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
+from lapwrench.drivers.ft import wire_counts
+
 
 class CliError(Exception):
     """An argument or device problem reported as ``lapwrench run: <message>`` with exit code 2."""
@@ -179,8 +181,7 @@ def _open_sources(
         from lapwrench.drivers.fakes import FakeFTDevice
 
         def counts(_i: int) -> np.ndarray:
-            f = script.force_H()
-            return np.concatenate([f * 10000.0, np.zeros(3)]).round()
+            return _hex_counts(script.force_H())
 
         fake = FakeFTDevice(rate_hz=1000.0, counts_fn=counts).start()
         devices.add(fake.close)
@@ -231,9 +232,13 @@ def _open_sources(
 
 
 # -- the simulated F/T box in its own process, and the dry run's simulated devices ------------------
+def _hex_counts(force: Any) -> np.ndarray:
+    """Raw counts (:data:`~lapwrench.drivers.ft.WIRE_ORDER`) of a HEX box for a hand force (N), no torque."""
+    return wire_counts(force, counts_per_force=10000.0, counts_per_torque=100000.0)
+
+
 def _force_counts(force_fn: Callable[[float], Any], t0: Any, _i: int) -> np.ndarray:
-    f = np.asarray(force_fn(time.monotonic() - t0.value), dtype=float)
-    return np.concatenate([f * 10000.0, np.zeros(3)]).round()
+    return _hex_counts(force_fn(time.monotonic() - t0.value))
 
 
 def _fake_ft_main(

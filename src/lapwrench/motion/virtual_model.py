@@ -21,6 +21,7 @@ from typing import Literal
 
 import numpy as np
 
+from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
 from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec
@@ -30,14 +31,14 @@ from lapwrench.spatial import Mat, Vec
 def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     """N_Eᵀ = I - J_Eᵀ Λ_E J_E M⁻¹, Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹: keeps the part of a torque that leaves {E} still.
 
-    N_E = I - J_E⁺ J_E is the dynamically consistent null-space projector of J_E (J_E⁺ weighted by
-    M, eq 4), so J_E M⁻¹ N_Eᵀ τ = 0 for every τ: the projected torque moves only the arm's
-    self-motion (1 DOF for the 7-DoF arm), never the scope.
+    N_E = I - J_E⁺ J_E is the dynamically consistent null-space projector of J_E (eq 3, with J_E⁺
+    the M-weighted inverse of eq 4, :func:`~lapwrench.allocation.weighted_pseudo_inverse`), so
+    J_E M⁻¹ N_Eᵀ τ = 0 for every τ: the projected torque moves only the arm's self-motion (1 DOF
+    for the 7-DoF arm), never the scope. Near a singularity of J_E the inverse is damped
+    (:func:`~lapwrench.allocation.regularised_inverse`).
     """
     J = kin.J_E
-    JT = np.ascontiguousarray(J.T)
-    A = J @ Minv @ JT + 1e-9 * np.eye(6)
-    return np.eye(kin.M.shape[0]) - JT @ np.linalg.solve(A, J @ Minv)
+    return np.ascontiguousarray(nullspace_projector(J, weighted_pseudo_inverse(J, Minv)).T)
 
 
 @kernel

@@ -31,19 +31,19 @@ class TaskGeometry(NamedTuple):
 
 
 @kernel
-def initial_rcm_point(kin: Kinematics, length: float, lambda0: float) -> Vec:
-    """Eq (18): p_R(t0) = p_E(θ0) + λ0 L d_z(θ0)."""
+def initial_rcm_point(kin: Kinematics | ScopeAxis, length: float, lambda0: float) -> Vec:
+    """Eq (18): p_R(t0) = p_E(θ0) + λ0 L d_z(θ0) (reads only ``kin.p_E`` and ``kin.d_z``)."""
     return kin.p_E + lambda0 * length * kin.d_z
 
 
 @kernel
-def rcm_error(kin: Kinematics, p_R: Vec) -> Vec:
+def rcm_error(kin: Kinematics | ScopeAxis, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
     return kin.P @ (p_R - kin.p_E)
 
 
 @kernel
-def insertion_depth(kin: Kinematics, p_R: Vec, length: float) -> float:
+def insertion_depth(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
     return length - float(kin.d_z @ (p_R - kin.p_E))
 

@@ -122,20 +122,22 @@ class ConstantPush:
     duration: float
     rise: float = RISE_S
 
-    def wrench(self, d: np.ndarray) -> np.ndarray:
-        """The full wrench [f (N), τ (N m)] for the shaft direction ``d``."""
+    def force_torque(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The full push as (force (N), torque (N m)), {B}, for the shaft direction ``d``."""
+        zero = np.zeros(3)
         if self.kind == "lateral":
-            return np.concatenate([self.magnitude * across_shaft(self.axis, d), np.zeros(3)])
+            return self.magnitude * across_shaft(self.axis, d), zero
         along = math.copysign(self.magnitude, float(self.axis @ d)) * d
-        return np.concatenate([np.zeros(3), along]) if self.kind == "roll" else np.concatenate([along, np.zeros(3)])
+        return (zero, along) if self.kind == "roll" else (along, zero)
 
     def apply(self, world: SimWorld, t: float, dt: float) -> float:
         """Set the hand wrench; returns the grip force (0 once released)."""
         if t >= self.duration:
-            world.set_hand_wrench(np.zeros(6))
+            world.set_hand_wrench()
             return 0.0
         scale = min(1.0, (t + dt) / self.rise, (self.duration - t) / self.rise)
-        world.set_hand_wrench(scale * self.wrench(world.shaft_axis()[1]))
+        force, torque = self.force_torque(world.shaft_axis()[1])
+        world.set_hand_wrench(force=scale * force, torque=scale * torque)
         return self.grip_force
 
 
@@ -167,7 +169,6 @@ class _Watch:
     """What a run records beside the loop's trace."""
 
     d0: np.ndarray
-    length: float  # scope length (m)
     depth0: float  # tip depth (m) beyond the unloaded incision at the start
     walls: Counter
     hit_ticks: int = 0
@@ -177,10 +178,10 @@ class _Watch:
 
         Measured from where the incision sits with no shaft load (it moves with the phantom, not
         with the wall's elastic give), like the physical RCM error: so it is the tip's depth in the
-        body, the distance that matters for the tissue below.
+        body, the distance that matters for the tissue below. The controller's depth formula
+        (:meth:`SimWorld.axis_offset`) with the simulated pose and the unloaded incision for p_R.
         """
-        p_E, d_z = world.shaft_axis()
-        return self.length - float((world.incision_rest_position() - p_E) @ d_z)
+        return world.axis_offset(world.incision_rest_position())[1]
 
     def tilt_deg(self, world: SimWorld) -> float:
         """Angle (deg) of the shaft from its start axis."""
@@ -191,7 +192,7 @@ def run_case(cfg: Config, case: PushCase, opts: ScenarioOptions, push_s: float, 
     """One hard push from the reset pose; a safety hold or a simulation stop ends it early."""
     loop = ClosedLoop(cfg, seed=opts.seed)
     world = loop.world
-    watch = _Watch(world.shaft_axis()[1], world.scene.config.scope.length, 0.0, Counter())
+    watch = _Watch(world.shaft_axis()[1], 0.0, Counter())
     watch.depth0 = watch.tip_depth(world)
     hand = make_hand(case, world, push_s)
     trace = Trace()

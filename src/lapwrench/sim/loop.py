@@ -259,10 +259,11 @@ class ClosedLoop:
     def physical_rcm_error(self) -> float:
         """Distance (m) from the unloaded incision point (where the wall would sit with no shaft
         load) to the shaft axis: how far the scope drags the incision. The trocar's own position
-        always lies on the axis, so this is the physically meaningful RCM error."""
-        p, d = self.world.shaft_axis()
-        r = self.world.incision_rest_position() - p
-        return float(np.linalg.norm(r - (r @ d) * d))
+        always lies on the axis, so this is the physically meaningful RCM error.
+
+        Eq (27)'s |e_R| (:meth:`SimWorld.axis_offset`), with the simulated scope's pose and the
+        unloaded incision in place of the model's p_E and the controller's p_R."""
+        return self.world.axis_offset(self.world.incision_rest_position())[0]
 
     def record(self, trace: Trace, res: TickResult, **extra: object) -> None:
         w = self.world
@@ -281,7 +282,8 @@ class ClosedLoop:
             p_E=p_E,
             d_z=d_z,
             q_ref=res.q_ref,
-            hand=w.hand_wrench(),
+            hand_force=w.hand_force(),
+            hand_torque=w.hand_torque(),
             insertion_depth=w.insertion_depth(),
             **extra,
         )

@@ -158,7 +158,7 @@ class SimRobot:
         if self.hand_force_H is not None:
             _, R_H = self.world.frame_pose("lap_H")
             f = np.asarray(self.hand_force_H(self.robot_time), dtype=float)
-            self.world.set_hand_wrench(np.concatenate([R_H @ f, np.zeros(3)]))
+            self.world.set_hand_wrench(force=R_H @ f)
         self.world.step(np.asarray(q_ref, dtype=float))  # SimulationUnstableError is a RobotError
         self.robot_time += self.dt
 

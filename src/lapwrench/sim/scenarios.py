@@ -246,7 +246,7 @@ def needle_search(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Scena
         else:
             loop.world.set_instrument_tip(0, state["fetch"].tip(t - t7))  # type: ignore[attr-defined]
         if t < t3:
-            loop.world.set_hand_wrench(np.zeros(6))
+            loop.world.set_hand_wrench()  # hand off
             return 0.0
         grip_force = hand.apply(loop.world, t, CONTROL_DT)
         if not hand.engaged and t7 is None:
@@ -295,7 +295,7 @@ def workflow(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioRe
             return h1.apply(loop.world, t, CONTROL_DT)
         if 30.0 * s <= t and h2.engaged:
             return h2.apply(loop.world, t, CONTROL_DT)
-        loop.world.set_hand_wrench(np.zeros(6))
+        loop.world.set_hand_wrench()  # hand off
         return 0.0
 
     return _scripted_run("workflow", cfg, opts, 40.0 * s, script)

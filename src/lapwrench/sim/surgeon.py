@@ -66,14 +66,14 @@ class HandGuide:
     def apply(self, world: SimWorld, t: float, dt: float) -> float:
         """Set the hand wrench on the world; returns the grip force (0 once released)."""
         if not self.engaged:
-            world.set_hand_wrench(np.zeros(6))
+            world.set_hand_wrench()
             return 0.0
         _, d = world.shaft_axis()
         angle = axis_angle(d, self.target_axis)
         if angle < math.radians(self.tolerance_deg):
             self.engaged = False
             self.done_time = t
-            world.set_hand_wrench(np.zeros(6))
+            world.set_hand_wrench()
             return 0.0
         toward = across_shaft(self.target_axis, d)  # where the tip must go
         if self.max_speed is None:
@@ -90,7 +90,7 @@ class HandGuide:
             )
             magnitude = self._force
         force = -magnitude * toward  # the handle sits behind the pivot: push it the other way
-        world.set_hand_wrench(np.concatenate([force, self.twist_torque * d]))
+        world.set_hand_wrench(force=force, torque=self.twist_torque * d)
         return self.grip_force
 
 
@@ -189,8 +189,8 @@ class SpeedDrivenHand:
         step = self.force_rate * dt
         self._force += float(np.clip(wanted - self._force, -step, step))
         if not self.engaged and self._force <= 0.0:
-            world.set_hand_wrench(np.zeros(6))
+            world.set_hand_wrench()
             return 0.0
         toward = across_shaft(self.direction, d)
-        world.set_hand_wrench(np.concatenate([-self._force * toward, np.zeros(3)]))  # handle behind the pivot
+        world.set_hand_wrench(force=-self._force * toward)  # handle behind the pivot
         return self.grip_force

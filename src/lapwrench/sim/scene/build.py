@@ -9,7 +9,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from lapwrench.rcm.geometry import initial_rcm_point
 from lapwrench.robot.description import ARM_SPECS
+from lapwrench.robot.model import ScopeAxis, scope_axis
 from lapwrench.sim.scene.arm import add_joint_servos, add_link_capsules, build_arm_spec, flange_pose_at
 from lapwrench.sim.scene.camera import add_overview_camera, configure_rendering
 from lapwrench.sim.scene.config import SceneConfig
@@ -51,9 +53,11 @@ def _scope_quat_at(cfg: SceneConfig) -> np.ndarray:
 
 
 def incision_position_for(cfg: SceneConfig) -> np.ndarray:
-    """Rest position of the incision: lambda0 * L along the shaft from lap_E at q0 (eq. 18)."""
+    """Rest position of the incision: lambda0 * L along the shaft from lap_E at q0, eq (18)'s
+    p_R(t0) (:func:`~lapwrench.rcm.geometry.initial_rcm_point`) with MuJoCo's lap_E pose at q0."""
     p_e, R = flange_pose_at(cfg.kind, cfg.scope, tuple(cfg.initial_configuration().tolist()))
-    return p_e + cfg.rcm_lambda0 * cfg.scope.length * R[:, 2]
+    d_z, P = scope_axis(R)
+    return initial_rcm_point(ScopeAxis(p_e, d_z, P), cfg.scope.length, cfg.rcm_lambda0)
 
 
 def build_scene(config: SceneConfig | None = None) -> Scene:

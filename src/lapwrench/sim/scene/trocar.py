@@ -89,7 +89,7 @@ def add_incision(spec: mujoco.MjSpec, housing: mujoco.MjsBody, cfg: SceneConfig,
     eq = spec.add_equality(name=TROCAR_WELD, type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY)
     eq.name1 = SLEEVE_BODY
     eq.name2 = "lap_shaft"
-    depth = cfg.rcm_lambda0 * scope.length
+    depth = cfg.rcm_lambda0 * scope.length  # eq (18)'s λ0 L in lap_E's own frame: incision_position_for's point
     # data: anchor in body2 (shaft) frame = the incision point; the same point in body1 (sleeve)
     # frame = its origin; relative orientation = identity; torquescale.
     eq.data = [0.0, 0.0, depth, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]

@@ -181,7 +181,7 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         """Compile the tick's kernels now (or load them from numba's cache), not in the first tick:
         one tick and the per-tick calls, then back to the state :meth:`reset` leaves."""
         try:
-            self.set_hand_wrench(np.zeros(6))
+            self.set_hand_wrench()
             self.set_housing_load(np.zeros(3))
             self.contact_force()
             self.step(self.scene.q0)

@@ -7,6 +7,7 @@ A mixin: the world builds the views of ``MjData`` and the ids it writes (listed 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lapwrench.sim.scene.instruments import instrument_pose_through_port
 from lapwrench.sim.world.kernels import _all_finite
@@ -25,17 +26,31 @@ class WorldLoads:
     _mocap_pos: np.ndarray
     _mocap_quat: np.ndarray
 
-    def set_hand_wrench(self, wrench: np.ndarray) -> None:
-        """Apply the surgeon's hand wrench [f, tau] (N, N m; base frame, about lap_H) until changed."""
-        w = np.asarray(wrench, float)
-        if w.shape != (6,) or not _all_finite(w):
-            raise ValueError(f"hand wrench must be 6 finite numbers, got {wrench!r}")
-        # lap_H is massless, so its xfrc_applied acts at the lap_H origin.
-        self._xfrc_applied[self._body_H] = w
+    def set_hand_wrench(self, *, force: ArrayLike | None = None, torque: ArrayLike | None = None) -> None:
+        """Apply the surgeon's hand on the handle until changed: ``force`` (N) and ``torque`` (N m,
+        about the lap_H origin), both in {B} (the base frame, which is MuJoCo's world frame here).
+        An omitted (``None``) part is zero; no arguments take the hand off.
 
-    def hand_wrench(self) -> np.ndarray:
-        """The hand wrench currently applied at lap_H."""
-        return self._xfrc_applied[self._body_H].copy()
+        Keyword-only, so the order cannot be mixed up: MuJoCo's ``xfrc_applied`` row is
+        [force; torque], lapwrench's wrenches (:class:`~lapwrench.spatial.Wrench`) are [moment; force].
+        """
+        f = np.zeros(3) if force is None else np.asarray(force, float)
+        tau = np.zeros(3) if torque is None else np.asarray(torque, float)
+        for name, v, given in (("force", f, force), ("torque", tau, torque)):
+            if v.shape != (3,) or not _all_finite(v):
+                raise ValueError(f"hand {name} must be 3 finite numbers, got {given!r}")
+        # lap_H is massless, so its xfrc_applied acts at the lap_H origin.
+        row = self._xfrc_applied[self._body_H]
+        row[:3] = f
+        row[3:] = tau
+
+    def hand_force(self) -> np.ndarray:
+        """The hand force (N, {B}) currently applied at lap_H (:meth:`set_hand_wrench`)."""
+        return self._xfrc_applied[self._body_H, :3].copy()
+
+    def hand_torque(self) -> np.ndarray:
+        """The hand torque (N m, {B}, about the lap_H origin) currently applied (:meth:`set_hand_wrench`)."""
+        return self._xfrc_applied[self._body_H, 3:].copy()
 
     def set_housing_load(self, force: np.ndarray) -> None:
         """Sustained force (N, base frame) on the phantom housing (only x, y move it)."""

@@ -10,7 +10,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.description import FRAME_C
+from lapwrench.robot.model import scope_axis
 from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.world.kernels import _weld_force
 
@@ -140,11 +142,27 @@ class WorldReadings:
         """Lateral displacement (x, y, 0) of the phantom housing from its initial place (m)."""
         return np.array([*self._qpos[self._housing_qadr], 0.0])
 
+    def axis_offset(self, point: np.ndarray) -> tuple[float, float]:
+        """(distance (m) from ``point`` to the shaft axis line, depth (m) of the scope tip beyond
+        ``point`` along the shaft) for the simulated scope's pose.
+
+        The controller's eq (27) |e_R| and tip depth (:func:`~lapwrench.rcm.geometry.axis_rcm_error_and_depth`,
+        the one copy of those formulas) with MuJoCo's lap_E pose and a ground-truth point in
+        place of the model's p_E and the controller's p_R.
+        """
+        b = self._body_E
+        d_z, P = scope_axis(self._xmat[b].reshape(3, 3))
+        e, depth = axis_rcm_error_and_depth(
+            self._xpos[b], d_z, P, np.ascontiguousarray(point, dtype=np.float64), float(self.scene.config.scope.length)
+        )
+        return float(e), float(depth)
+
     def rcm_error(self) -> float:
-        """Physical RCM error (m): distance from the incision point to the shaft axis line."""
-        p, dz = self.shaft_axis()
-        r = self.incision_position() - p
-        return float(np.linalg.norm(r - (r @ dz) * dz))
+        """Physical RCM error (m): distance from the current incision point (the trocar, which
+        sits on the shaft) to the shaft axis line (:meth:`axis_offset`). Near zero by construction;
+        :meth:`~lapwrench.sim.loop.ClosedLoop.physical_rcm_error` measures from the *unloaded*
+        incision instead."""
+        return self.axis_offset(self.incision_position())[0]
 
     def insertion_depth(self) -> float:
         """Distance (m) from lap_E to the incision along the shaft (lambda * L)."""
