@@ -32,7 +32,8 @@ from lapwrench.sensors import (
     SensorFrame,
     TactileReading,
 )
-from lapwrench.tick_core import SaturationInputs, TickParams, saturation_stage
+from lapwrench.tick_core import SaturationInputs, saturation_stage
+from lapwrench.tick_params import TickParams
 from lapwrench.virtual import DEFAULT_Q0
 
 

@@ -49,17 +49,20 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 ROOT = "lapwrench"
 
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("base", ("lapwrench", "lapwrench.jit", "lapwrench.config_yaml", "lapwrench.config", "lapwrench.buffer",
-              "lapwrench.cli_types")),
+    ("base", ("lapwrench", "lapwrench.jit", "lapwrench.config_yaml", "lapwrench.config_ranges", "lapwrench.config",
+              "lapwrench.buffer", "lapwrench.cli_types")),
     ("spatial", ("lapwrench.spatial", "lapwrench.shaping")),
     ("robot", ("lapwrench.robot",)),
     ("sensors", ("lapwrench.sensors",)),
     ("geometry", ("lapwrench.rcm",)),
     ("control-terms", ("lapwrench.wrenches", "lapwrench.allocation", "lapwrench.motion")),
-    ("control", ("lapwrench.tick_core", "lapwrench.compiled_tick", "lapwrench.controller")),
+    ("control", ("lapwrench.tick_params", "lapwrench.tick_core", "lapwrench.compiled_tick", "lapwrench.controller")),
     (
         "loop",
-        ("lapwrench.sources", "lapwrench.robot_interface", "lapwrench.safety", "lapwrench.loop", "lapwrench.virtual"),
+        (
+            "lapwrench.sources", "lapwrench.robot_interface", "lapwrench.safety", "lapwrench.loop_stats",
+            "lapwrench.loop", "lapwrench.virtual",
+        ),
     ),
     ("drivers", ("lapwrench.drivers",)),
     ("perception", ("lapwrench.perception",)),

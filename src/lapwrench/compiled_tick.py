@@ -27,13 +27,13 @@ from lapwrench.sensors import ValidInputs
 from lapwrench.spatial import Mat, Vec
 from lapwrench.tick_core import (
     SaturationInputs,
-    TickParams,
     fill_saturation_inputs,
     geometry_stage,
     motion_stage,
     saturation_stage,
     tick_stage,
 )
+from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import DampingSource, TickContext, WrenchSource
 
 BUILT_IN_WRENCHES = ("rcm", "interaction", "tracking", "viscous")

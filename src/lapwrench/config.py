@@ -5,10 +5,12 @@ key against these dataclasses: an unknown key, a wrong type, a value outside its
 or an inconsistent pair (epsilon2 <= epsilon1, u0 outside the image, ...) raises
 :class:`ConfigError` naming the key (and, from a file, its line).
 
-Every number has a range (``_range("[lo, hi]", default, why)``, brackets closed, parentheses
+Every number has a range (``ranged("[lo, hi]", default, why)``, brackets closed, parentheses
 open) chosen from what makes physical sense for the Franka arm, the 64-element tactile handle and a
 laparoscope; the ``why`` text is shown in the error. The file itself is read by
 :mod:`lapwrench.config_yaml`: at most 1 MiB of UTF-8, no aliases or anchors, no duplicate keys.
+The ranges and the checking of each value read live in :mod:`lapwrench.config_ranges`; this
+module holds the sections and loading/saving.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -25,6 +26,8 @@ from typing import Any, Literal
 import yaml
 
 from lapwrench import config_yaml
+from lapwrench.config_ranges import ConfigError, build, ranged
+from lapwrench.config_ranges import Range as Range  # re-exported: a field's metadata["range"]
 from lapwrench.config_yaml import short
 
 Ramp = Literal["printed", "c1"]
@@ -34,60 +37,13 @@ TACTILE_ELEMENTS = 64  # elements of the handle's grip array (lapwrench.sensors.
 TACTILE_MAX_VALUE = 255  # largest element reading
 
 
-class ConfigError(ValueError):
-    """A configuration value is missing, unknown, of the wrong type or out of range.
-
-    ``key`` is the dotted key path the error is about (``"rcm.Kp"``), when there is one.
-    """
-
-    def __init__(self, message: str, key: str | None = None) -> None:
-        super().__init__(message)
-        self.key = key
-
-
-@dataclass(frozen=True)
-class Range:
-    """An interval ``lo .. hi`` with open or closed ends, and why a value must lie in it."""
-
-    lo: float
-    hi: float
-    lo_open: bool
-    hi_open: bool
-    why: str = ""
-
-    def __contains__(self, x: float) -> bool:
-        above = x > self.lo if self.lo_open else x >= self.lo
-        below = x < self.hi if self.hi_open else x <= self.hi
-        return above and below
-
-    def __str__(self) -> str:
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
-
-
-_INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")
-
-
-def _interval(spec: str, why: str) -> Range:
-    """Parse ``"(0, 1]"``-style interval notation (``pi`` allowed as a bound)."""
-    m = _INTERVAL.match(spec)
-    if m is None:
-        raise ValueError(f"bad interval {spec!r}")
-    lo, hi = (math.pi if b == "pi" else float(b) for b in (m[2], m[3]))
-    return Range(lo, hi, m[1] == "(", m[4] == ")", why)
-
-
-def _range(spec: str, default: Any, why: str = "") -> Any:
-    """A dataclass field whose value must lie in ``spec`` (interval notation); ``why`` says why."""
-    return field(default=default, metadata={"range": _interval(spec, why)})
-
-
 @dataclass(frozen=True)
 class RobotConfig:
     kind: Literal["panda", "fr3"] = "panda"
     # the `run` and `demo` commands further require 1000 (the Franka differentiates over 1 ms)
-    control_rate_hz: float = _range("[1, 10000]", 1000.0, "Hz, a control rate")
-    limit_fraction: float = _range("[0.05, 1]", 0.9, "fraction of the Franka limits; below 5% the arm barely moves")
-    position_margin: float = _range("[0, 0.5]", 0.05, "rad; more would shrink some Franka joint ranges to nothing")
+    control_rate_hz: float = ranged("[1, 10000]", 1000.0, "Hz, a control rate")
+    limit_fraction: float = ranged("[0.05, 1]", 0.9, "fraction of the Franka limits; below 5% the arm barely moves")
+    position_margin: float = ranged("[0, 0.5]", 0.05, "rad; more would shrink some Franka joint ranges to nothing")
 
     @property
     def dt(self) -> float:
@@ -96,48 +52,48 @@ class RobotConfig:
 
 @dataclass(frozen=True)
 class ScopeConfig:
-    length: float = _range("[0.1, 0.6]", 0.29, "m, laparoscopes are 0.1-0.6 m long")
-    lambda0: float = _range("(0, 1)", 0.8, "fraction of the scope length where the RCM point starts")
-    handle_offset: float = _range("[0, 0.5]", 0.04, "m along the shaft, and shorter than scope.length")
-    oblique_angle_deg: float = _range("[0, 90)", 0.0, "degrees of view angle off the shaft (0, 30, 45, 70)")
+    length: float = ranged("[0.1, 0.6]", 0.29, "m, laparoscopes are 0.1-0.6 m long")
+    lambda0: float = ranged("(0, 1)", 0.8, "fraction of the scope length where the RCM point starts")
+    handle_offset: float = ranged("[0, 0.5]", 0.04, "m along the shaft, and shorter than scope.length")
+    oblique_angle_deg: float = ranged("[0, 90)", 0.0, "degrees of view angle off the shaft (0, 30, 45, 70)")
 
 
 @dataclass(frozen=True)
 class InteractionConfig:
-    k_H: float = _range("[200, 100000]", 2000.0, "delta = sum(Se)/k_H; below 200 a full grip gives delta > 80")
-    k_min: int = _range(f"[0, {TACTILE_ELEMENTS - 1}]", 3, "contacts needed: n_c > k_min of the 64 elements")
-    contact_threshold: int = _range(
+    k_H: float = ranged("[200, 100000]", 2000.0, "delta = sum(Se)/k_H; below 200 a full grip gives delta > 80")
+    k_min: int = ranged(f"[0, {TACTILE_ELEMENTS - 1}]", 3, "contacts needed: n_c > k_min of the 64 elements")
+    contact_threshold: int = ranged(
         f"[0, {TACTILE_MAX_VALUE - 1}]", 0, "an element reads 0..255; at 255 nothing ever counts as contact"
     )
-    force_range: float = _range("[1, 2000]", 200.0, "N, an F/T sensor's measuring range (HEX-E: 200)")
-    torque_range: float = _range("[0.1, 200]", 10.0, "N m, an F/T sensor's measuring range (HEX-E: 10)")
+    force_range: float = ranged("[1, 2000]", 200.0, "N, an F/T sensor's measuring range (HEX-E: 200)")
+    torque_range: float = ranged("[0.1, 200]", 10.0, "N m, an F/T sensor's measuring range (HEX-E: 10)")
 
 
 @dataclass(frozen=True)
 class CameraConfig:
-    width: int = _range("[16, 8192]", 640, "pixels")
-    height: int = _range("[16, 8192]", 480, "pixels")
-    fx: float = _range("[10, 100000]", 506.57, "pixels, a focal length")
-    fy: float = _range("[10, 100000]", 506.72, "pixels, a focal length")
-    u0: float = _range("(0, 8192)", 312.22, "pixels, inside the image width")
-    v0: float = _range("(0, 8192)", 243.39, "pixels, inside the image height")
+    width: int = ranged("[16, 8192]", 640, "pixels")
+    height: int = ranged("[16, 8192]", 480, "pixels")
+    fx: float = ranged("[10, 100000]", 506.57, "pixels, a focal length")
+    fy: float = ranged("[10, 100000]", 506.72, "pixels, a focal length")
+    u0: float = ranged("(0, 8192)", 312.22, "pixels, inside the image width")
+    v0: float = ranged("(0, 8192)", 243.39, "pixels, inside the image height")
 
 
 @dataclass(frozen=True)
 class TrackingConfig:
-    epsilon1: float = _range("(0, 12000)", 50.0, "pixels, inside the image diagonal")
-    epsilon2: float = _range("(0, 12000]", 200.0, "pixels, beyond epsilon1")
-    F_max: float = _range("(0, 50]", 10.0, "N, about what a hand pushes a scope with")
+    epsilon1: float = ranged("(0, 12000)", 50.0, "pixels, inside the image diagonal")
+    epsilon2: float = ranged("(0, 12000]", 200.0, "pixels, beyond epsilon1")
+    F_max: float = ranged("(0, 50]", 10.0, "N, about what a hand pushes a scope with")
     # eq 8 sums over the detections: the sum is capped, so the force never grows with their number
-    F_sum_max: float = _range("(0, 100]", 20.0, "N, cap on the summed tracking force (two ports: 2 x F_max)")
+    F_sum_max: float = ranged("(0, 100]", 20.0, "N, cap on the summed tracking force (two ports: 2 x F_max)")
     ramp: Ramp = "printed"
     direction: Literal["printed", "image_plane"] = "image_plane"
 
 
 @dataclass(frozen=True)
 class RcmConfig:
-    Kp: float = _range("(0, 10000]", 300.0, "N/m: 10 N at 1 mm; stiffer rings through the arm's admittance")
-    Kd: float = _range("(0, 2000]", 20.0, "N s/m; beyond, damping swamps the arm's inertia and the solve breaks")
+    Kp: float = ranged("(0, 10000]", 300.0, "N/m: 10 N at 1 mm; stiffer rings through the arm's admittance")
+    Kd: float = ranged("(0, 2000]", 20.0, "N s/m; beyond, damping swamps the arm's inertia and the solve breaks")
 
 
 @dataclass(frozen=True)
@@ -151,22 +107,22 @@ class AdaptiveRcmConfig:
     """
 
     enabled: bool = True
-    F_op: float = _range("(0, 100]", 10.0, "N, saturation of the mapped residual force")
-    gamma1: float = _range("(0, 100]", 5.0, "N, dead zone of the residual force")
-    gamma2: float = _range("(0, 200]", 15.0, "N, saturation of the residual force, beyond gamma1")
+    F_op: float = ranged("(0, 100]", 10.0, "N, saturation of the mapped residual force")
+    gamma1: float = ranged("(0, 100]", 5.0, "N, dead zone of the residual force")
+    gamma2: float = ranged("(0, 200]", 15.0, "N, saturation of the residual force, beyond gamma1")
     ramp: Ramp = "printed"
-    alpha: float = _range("(0, 0.05]", 0.003, "m/(N s); alpha F_op is how fast the RCM point moves")
-    beta: float = _range("(0, 10]", 0.05, "1/s, leakage to the anchor")
-    epsilon: float = _range("(0, 0.1]", 5e-4, "m/s, anchor update threshold")
+    alpha: float = ranged("(0, 0.05]", 0.003, "m/(N s); alpha F_op is how fast the RCM point moves")
+    beta: float = ranged("(0, 10]", 0.05, "1/s, leakage to the anchor")
+    epsilon: float = ranged("(0, 0.1]", 5e-4, "m/s, anchor update threshold")
     gate: Literal["speed", "none"] = "speed"
     # no adaptation above each of these (the Franka's flange moves at most ~2 m/s)
-    gate_angular_speed: float = _range("(0, 10]", 0.2, "rad/s, |P ω_E|")
-    gate_linear_speed: float = _range("(0, 2]", 0.1, "m/s, |v_E| of the flange")
-    gate_angular_acceleration: float = _range("(0, 100]", 2.0, "rad/s^2, filtered |P ω̇_E|")
-    gate_linear_acceleration: float = _range("(0, 50]", 2.0, "m/s^2, filtered |v̇_E|")
-    gate_soft: float = _range("[0, 1]", 0.5, "fraction of each threshold where w starts to fall (1: hard gate)")
-    gate_filter_time: float = _range("[0, 10]", 0.02, "s, time constant of the acceleration filter")
-    gate_release_time: float = _range("[0, 10]", 0.1, "s, w re-opens from 0 to 1 at most this fast")
+    gate_angular_speed: float = ranged("(0, 10]", 0.2, "rad/s, |P ω_E|")
+    gate_linear_speed: float = ranged("(0, 2]", 0.1, "m/s, |v_E| of the flange")
+    gate_angular_acceleration: float = ranged("(0, 100]", 2.0, "rad/s^2, filtered |P ω̇_E|")
+    gate_linear_acceleration: float = ranged("(0, 50]", 2.0, "m/s^2, filtered |v̇_E|")
+    gate_soft: float = ranged("[0, 1]", 0.5, "fraction of each threshold where w starts to fall (1: hard gate)")
+    gate_filter_time: float = ranged("[0, 10]", 0.02, "s, time constant of the acceleration filter")
+    gate_release_time: float = ranged("[0, 10]", 0.1, "s, w re-opens from 0 to 1 at most this fast")
 
     def __post_init__(self) -> None:
         if not self.gate_soft <= 1.0:
@@ -184,19 +140,19 @@ class AdaptiveRcmConfig:
 @dataclass(frozen=True)
 class ViscousConfig:
     # below the lower bounds a 10 N push asks for > 100 m/s (or rad/s): only the limits would hold it
-    k_t: float = _range("[0.1, 10000]", 150.0, "N m s, angular damping")
-    k_f: float = _range("[0.1, 10000]", 150.0, "N s/m; the paper prints 2 (README, 'damping')")
-    k_t_unguided: float = _range("[0.1, 10000]", 2.0, "N m s, k_t while no hand grips the handle")
+    k_t: float = ranged("[0.1, 10000]", 150.0, "N m s, angular damping")
+    k_f: float = ranged("[0.1, 10000]", 150.0, "N s/m; the paper prints 2 (README, 'damping')")
+    k_t_unguided: float = ranged("[0.1, 10000]", 2.0, "N m s, k_t while no hand grips the handle")
 
 
 @dataclass(frozen=True)
 class MotionConfig:
     integrator: Literal["semi_implicit", "explicit"] = "semi_implicit"
-    self_motion_damping: float = _range("[0, 1000]", 10.0, "1/s, mass-proportional damping of self-motion")
+    self_motion_damping: float = ranged("[0, 1000]", 10.0, "1/s, mass-proportional damping of self-motion")
     rcm_task: Literal["lateral", "printed"] = "lateral"
-    joint_limit_zone: float = _range("[0, 1]", 0.3, "rad inside each joint limit where self-motion pushes away")
-    joint_limit_stiffness: float = _range("[0, 1000]", 5.0, "N m/rad of that push (0: off)")
-    stop_time: float = _range("[0.005, 10]", 0.1, "s, null-space brake time constant (at least 5 ticks)")
+    joint_limit_zone: float = ranged("[0, 1]", 0.3, "rad inside each joint limit where self-motion pushes away")
+    joint_limit_stiffness: float = ranged("[0, 1000]", 5.0, "N m/rad of that push (0: off)")
+    stop_time: float = ranged("[0.005, 10]", 0.1, "s, null-space brake time constant (at least 5 ticks)")
 
 
 @dataclass(frozen=True)
@@ -209,31 +165,31 @@ class EnvelopeConfig:
     """
 
     enabled: bool = True
-    pivot_speed_max: float = _range("(0, 10]", 0.5, "rad/s, angular speed of the shaft about p_R")
-    pivot_deceleration: float = _range("(0, 100]", 4.0, "rad/s^2")
-    insertion_speed_max: float = _range("(0, 2]", 0.05, "m/s along the shaft")
-    insertion_deceleration: float = _range("(0, 50]", 0.5, "m/s^2")
-    depth_min: float = _range("(0, 0.6)", 0.03, "m of scope beyond p_R, shorter than scope.length")
-    depth_max: float = _range("(0, 0.6)", 0.12, "m of scope beyond p_R, shorter than scope.length")
-    roll_range: float = _range("(0, pi]", 1.5708, "rad, |roll| about the shaft from the start pose")
-    roll_speed_max: float = _range("(0, 10]", 1.0, "rad/s")
+    pivot_speed_max: float = ranged("(0, 10]", 0.5, "rad/s, angular speed of the shaft about p_R")
+    pivot_deceleration: float = ranged("(0, 100]", 4.0, "rad/s^2")
+    insertion_speed_max: float = ranged("(0, 2]", 0.05, "m/s along the shaft")
+    insertion_deceleration: float = ranged("(0, 50]", 0.5, "m/s^2")
+    depth_min: float = ranged("(0, 0.6)", 0.03, "m of scope beyond p_R, shorter than scope.length")
+    depth_max: float = ranged("(0, 0.6)", 0.12, "m of scope beyond p_R, shorter than scope.length")
+    roll_range: float = ranged("(0, pi]", 1.5708, "rad, |roll| about the shaft from the start pose")
+    roll_speed_max: float = ranged("(0, 10]", 1.0, "rad/s")
 
 
 @dataclass(frozen=True)
 class SafetyConfig:
     """Bounds the safety supervisor checks on *measured* state; each one holds the arm with an alarm."""
 
-    max_rcm_error: float = _range("(0, 0.1]", 0.005, "m, p_R to the scope axis at the measured joints")
-    depth_tolerance: float = _range("[0, 0.1]", 0.005, "m beyond the envelope's depth range")
-    max_residual_force: float = _range("(0, 500]", 20.0, "N, |ΔF| (eq 19): the scope's force on the wall")
-    residual_force_time: float = _range("[0, 10]", 0.05, "s |ΔF| must stay over its bound (estimate lag)")
+    max_rcm_error: float = ranged("(0, 0.1]", 0.005, "m, p_R to the scope axis at the measured joints")
+    depth_tolerance: float = ranged("[0, 0.1]", 0.005, "m beyond the envelope's depth range")
+    max_residual_force: float = ranged("(0, 500]", 20.0, "N, |ΔF| (eq 19): the scope's force on the wall")
+    residual_force_time: float = ranged("[0, 10]", 0.05, "s |ΔF| must stay over its bound (estimate lag)")
 
 
 @dataclass(frozen=True)
 class InputsConfig:
-    max_rcm_error: float = _range("(0, 0.1]", 0.02, "m; larger errors are reported by the controller")
-    max_image_age: float = _range("(0, 10]", 0.2, "s; older instrument detections count as none")
-    max_instruments: int = _range("[1, 64]", 8, "more detections in one frame are a detector fault: none used")
+    max_rcm_error: float = ranged("(0, 0.1]", 0.02, "m; larger errors are reported by the controller")
+    max_image_age: float = ranged("(0, 10]", 0.2, "s; older instrument detections count as none")
+    max_instruments: int = ranged("[1, 64]", 8, "more detections in one frame are a detector fault: none used")
 
 
 _HEX = re.compile(r"^[0-9A-Fa-f]{2}(?: ?[0-9A-Fa-f]{2}){0,7}$")  # what bytes.fromhex reads, 1-8 bytes
@@ -289,67 +245,6 @@ class Config:
         return from_dict(data)
 
 
-def _number(key: str, value: Any, annotation: Any) -> int | float:
-    """``value`` as the int or (finite) float the field's annotation asks for."""
-    if annotation is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config key '{key}' must be an integer, got {short(value)}", key)
-        return value
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"config key '{key}' must be a number, got {short(value)}", key)
-    try:
-        number = float(value)
-    except OverflowError:  # an int beyond ~1.8e308
-        raise ConfigError(f"config key '{key}' is too large, got {short(value)}", key) from None
-    if not math.isfinite(number):
-        raise ConfigError(f"config key '{key}' must be finite, got {short(value)}", key)
-    return number
-
-
-def _check_value(key: str, value: Any, annotation: Any, bounds: Range | None) -> Any:
-    origin = typing.get_origin(annotation)
-    if origin is Literal:
-        allowed = typing.get_args(annotation)
-        if not isinstance(value, str | bool | int | float) or value not in allowed:
-            raise ConfigError(f"config key '{key}' must be one of {list(allowed)}, got {short(value)}", key)
-        return value
-    if annotation is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"config key '{key}' must be true or false, got {short(value)}", key)
-        return value
-    if annotation is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"config key '{key}' must be text, got {short(value)}", key)
-        return value
-    value = _number(key, value, annotation)
-    if bounds is not None and value not in bounds:
-        why = f" ({bounds.why})" if bounds.why else ""
-        raise ConfigError(f"config key '{key}' must lie in {bounds}{why}, got {short(value)}", key)
-    return value
-
-
-def _build(cls: type, data: Any, prefix: str) -> Any:
-    if not isinstance(data, dict):
-        raise ConfigError(
-            f"config section '{prefix or 'root'}' must be a mapping, got {type(data).__name__}", prefix or None
-        )
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    for key in data:
-        if key not in fields:
-            where = f"{prefix}.{key}" if prefix else str(key)
-            raise ConfigError(f"unknown config key {short(where)}; known keys here: {sorted(fields)}", where)
-    kwargs = {}
-    for name, f in fields.items():
-        key = f"{prefix}.{name}" if prefix else name
-        if name not in data:
-            continue
-        annotation = hints[name]
-        if dataclasses.is_dataclass(annotation):
-            kwargs[name] = _build(annotation, data[name], key)
-        else:
-            kwargs[name] = _check_value(key, data[name], annotation, f.metadata.get("range"))
-    return cls(**kwargs)
 
 
 def _require(ok: bool, key: str, message: str) -> None:
@@ -389,7 +284,7 @@ def ensure_writable_dir(path: str | Path) -> Path:
 
 def from_dict(data: dict[str, Any]) -> Config:
     """Validate a nested mapping and build a :class:`Config` (missing keys take the defaults)."""
-    cfg = _build(Config, data, "")
+    cfg = build(Config, data, "")
     _check_consistency(cfg)
     return cfg
 

@@ -32,7 +32,7 @@ from lapwrench.sensors import (
     TactileReading,
 )
 from lapwrench.spatial import Vec
-from lapwrench.tick_core import TickParams
+from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import WrenchSource
 
 MAX_KEPT_EVENTS = 10_000

@@ -14,7 +14,9 @@ One cycle (:meth:`ControlLoop.cycle`)::
     q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
     robot.command(q)
 
-The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`).
+The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`). The records a
+cycle and a run produce (:class:`Cycle`, :class:`LoopStats`) live in :mod:`lapwrench.loop_stats`
+and are importable from here.
 
 Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is
 ``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
@@ -32,94 +34,18 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from lapwrench.controller import Controller, TickResult
+from lapwrench.loop_stats import Cycle, Growable, LoopStats
 from lapwrench.robot.errors import RobotError
 from lapwrench.robot_interface import RobotInterface
-from lapwrench.safety.supervisor import MeasuredScope, SafetySupervisor, SupervisorEvent, measure_scope
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent, measure_scope
 from lapwrench.sensors import RobotReading, SensorFrame
 from lapwrench.sources import Source, fresh
 from lapwrench.spatial import Vec
-
-
-@dataclass
-class LoopStats:
-    """What a run measured. Times in microseconds; ``cycle_us`` is the period between reads."""
-
-    cycles: int = 0
-    cycle_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    compute_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    rcm_error_measured: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    rcm_error_reference: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    commands: np.ndarray = field(default_factory=lambda: np.zeros((0, 7)))
-    q_start: np.ndarray = field(default_factory=lambda: np.zeros(7))
-    p_R: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    robot_time: float = 0.0
-    wall_time: float = 0.0
-    deadline_misses: int = 0
-    over_budget: int = 0  # cycles whose compute time exceeded the budget (counted with or without deadlines)
-    alarm: str | None = None
-    stopped_at_rest: bool = False
-
-    def percentile(self, what: Literal["cycle", "compute"], p: float) -> float:
-        a = self.cycle_us if what == "cycle" else self.compute_us
-        return float(np.percentile(a, p)) if a.size else float("nan")
-
-    def summary(self) -> dict[str, float | int | str | bool | None]:
-        """The run's figures with units in the key names (for the CLI, the reports and the benchmarks)."""
-        return {
-            "robot_time_s": round(self.robot_time, 3),
-            "wall_time_s": round(self.wall_time, 3),
-            "cycles": self.cycles,
-            "cycle_p50_us": round(self.percentile("cycle", 50), 1),
-            "cycle_p99_us": round(self.percentile("cycle", 99), 1),
-            "compute_p50_us": round(self.percentile("compute", 50), 1),
-            "compute_p99_us": round(self.percentile("compute", 99), 1),
-            "deadline_misses": self.deadline_misses,
-            "over_budget_cycles": self.over_budget,
-            "rcm_error_measured_max_mm": round(float(self.rcm_error_measured.max()) * 1e3, 4)
-            if self.rcm_error_measured.size
-            else None,
-            "alarm": self.alarm,
-            "stopped_at_rest": self.stopped_at_rest,
-        }
-
-
-class _Growable:
-    """Append-only float array without per-append allocation."""
-
-    def __init__(self, width: int = 0, capacity: int = 16384) -> None:
-        self.n = 0
-        self.a = np.zeros((capacity, width) if width else capacity)
-
-    def append(self, x: Any) -> None:
-        if self.n == self.a.shape[0]:
-            self.a = np.concatenate([self.a, np.zeros_like(self.a)])
-        self.a[self.n] = x
-        self.n += 1
-
-    def array(self) -> np.ndarray:
-        return self.a[: self.n].copy()
-
-
-@dataclass
-class Cycle:
-    """One cycle's outcome: the frame the controller saw, its result (None after a failed tick),
-    the measured scope, the command sent, and the compute time (s)."""
-
-    k: int
-    frame: SensorFrame
-    reading: RobotReading
-    result: TickResult | None
-    scope: MeasuredScope
-    q_cmd: Vec
-    compute: float
-    period: float
-    events: list[SupervisorEvent]  # the supervisor's events of this cycle (drained)
 
 
 class ControlLoop:
@@ -360,7 +286,7 @@ class ControlLoop:
             self.start()
         sup, dt = self.supervisor, self.robot.dt
         q_start = np.array(self.last_reading.q if self.last_reading else np.zeros(7))
-        cyc, comp, rm, rr, cmds = _Growable(), _Growable(), _Growable(), _Growable(), _Growable(7)
+        cyc, comp, rm, rr, cmds = Growable(), Growable(), Growable(), Growable(), Growable(7)
         robot_t = 0.0
         stop_deadline: float | None = None
         wall0 = time.perf_counter()

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from lapwrench.drivers.base import DeviceTimeoutError, PacketError
-from lapwrench.drivers.fakes import FakeFTDevice
 from lapwrench.drivers.ft import (
     CMD_BIAS,
     CMD_SET_FILTER,
@@ -26,6 +25,7 @@ from lapwrench.drivers.ft import (
     unpack_record,
     unpack_request,
 )
+from lapwrench.drivers.simulated_hex import SimulatedHexBox
 
 RATE = 400.0  # modest, for 2 slow CI cores
 
@@ -40,8 +40,8 @@ def wait_until(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.0
 
 
 @pytest.fixture
-def device() -> Iterator[FakeFTDevice]:
-    dev = FakeFTDevice(rate_hz=RATE).start()
+def device() -> Iterator[SimulatedHexBox]:
+    dev = SimulatedHexBox(rate_hz=RATE).start()
     try:
         yield dev
     finally:
@@ -75,7 +75,7 @@ def test_unpack_request_rejects_wrong_header() -> None:
 
 
 # --------------------------------------------------------------------------- HEX
-def test_hex_scaling_defaults(device: FakeFTDevice) -> None:
+def test_hex_scaling_defaults(device: SimulatedHexBox) -> None:
     device.counts = np.array([10000, -20000, 5000, 100000, -250000, 0])
     with OnRobotHexSensor(*device.address) as s:
         s0 = s.latest()
@@ -88,7 +88,7 @@ def test_hex_scaling_defaults(device: FakeFTDevice) -> None:
     assert (CMD_START_REALTIME, 0) in device.commands
 
 
-def test_hex_configurable_scaling_and_device_commands(device: FakeFTDevice) -> None:
+def test_hex_configurable_scaling_and_device_commands(device: SimulatedHexBox) -> None:
     device.counts = np.array([500, 0, 0, 0, 0, 2000])
     with OnRobotHexSensor(
         *device.address, counts_per_force=100, counts_per_torque=1000, rate_hz=500, filter_code=4
@@ -105,7 +105,7 @@ def test_hex_configurable_scaling_and_device_commands(device: FakeFTDevice) -> N
     assert (CMD_SET_FILTER, 4) in device.commands
 
 
-def test_hex_tare_removes_offset(device: FakeFTDevice) -> None:
+def test_hex_tare_removes_offset(device: SimulatedHexBox) -> None:
     offset = np.array([12000, -3000, 40000, 5000, 0, -7000])
     device.counts = offset
     with OnRobotHexSensor(*device.address) as s:
@@ -123,7 +123,7 @@ def test_hex_tare_removes_offset(device: FakeFTDevice) -> None:
         assert wait_until(lambda: abs(s.latest().value.force[0] - 2.2) < 1e-9)
 
 
-def test_tare_averages_noisy_samples(device: FakeFTDevice) -> None:
+def test_tare_averages_noisy_samples(device: SimulatedHexBox) -> None:
     # alternate +-1000 counts around 5000: mean of an even number of samples is exact
     device.counts_fn = lambda i: [5000 + (1000 if i % 2 else -1000), 0, 0, 0, 0, 0]
     with OnRobotHexSensor(*device.address) as s:
@@ -131,13 +131,13 @@ def test_tare_averages_noisy_samples(device: FakeFTDevice) -> None:
         assert bias.force[0] == pytest.approx(0.5, abs=0.1 / 40 + 1e-9)
 
 
-def test_tare_requires_running_source(device: FakeFTDevice) -> None:
+def test_tare_requires_running_source(device: SimulatedHexBox) -> None:
     s = OnRobotHexSensor(*device.address)
     with pytest.raises(RuntimeError, match="running"):
         s.tare()
 
 
-def test_malformed_packets_are_counted_and_thread_survives(device: FakeFTDevice) -> None:
+def test_malformed_packets_are_counted_and_thread_survives(device: SimulatedHexBox) -> None:
     device.counts = np.array([10000, 0, 0, 0, 0, 0])
     with OnRobotHexSensor(*device.address) as s:
         device.inject([b"\x01\x02\x03", b"\x00" * 40, pack_request(CMD_START_REALTIME), b""])
@@ -150,7 +150,7 @@ def test_malformed_packets_are_counted_and_thread_survives(device: FakeFTDevice)
         assert s.status().malformed == 4
 
 
-def test_status_word_rejects_records(device: FakeFTDevice) -> None:
+def test_status_word_rejects_records(device: SimulatedHexBox) -> None:
     with OnRobotHexSensor(*device.address) as s:
         device.status = 0x80000001
         assert wait_until(lambda: s.status().malformed >= 3)
@@ -163,7 +163,7 @@ def test_status_word_rejects_records(device: FakeFTDevice) -> None:
         assert s.buffer.wait_newer(seq, timeout=2.0) is not None
 
 
-def test_rate_monitor_drops_and_out_of_order(device: FakeFTDevice) -> None:
+def test_rate_monitor_drops_and_out_of_order(device: SimulatedHexBox) -> None:
     with OnRobotHexSensor(*device.address, expected_rate_hz=RATE) as s:
         time.sleep(0.3)
         st = s.status()
@@ -177,7 +177,7 @@ def test_rate_monitor_drops_and_out_of_order(device: FakeFTDevice) -> None:
         assert st.out_of_order == 2
 
 
-def test_staleness_when_peer_goes_silent(device: FakeFTDevice) -> None:
+def test_staleness_when_peer_goes_silent(device: SimulatedHexBox) -> None:
     with OnRobotHexSensor(*device.address) as s:
         assert s.fresh(0.1)
         assert s.buffer.get_fresh(0.1) is not None
@@ -193,7 +193,7 @@ def test_staleness_when_peer_goes_silent(device: FakeFTDevice) -> None:
         assert wait_until(lambda: s.fresh(0.05))
 
 
-def test_stop_cleans_up_thread_and_socket(device: FakeFTDevice) -> None:
+def test_stop_cleans_up_thread_and_socket(device: SimulatedHexBox) -> None:
     baseline = threading.active_count()
     s = OnRobotHexSensor(*device.address).start()
     thread = s._thread
@@ -248,7 +248,7 @@ def test_closed_port_gives_clear_error() -> None:
 
 
 # --------------------------------------------------------------------------- ATI Net F/T
-def test_netft_default_scaling_and_rdt_commands(device: FakeFTDevice) -> None:
+def test_netft_default_scaling_and_rdt_commands(device: SimulatedHexBox) -> None:
     device.counts = np.array([1_000_000, 2_500_000, -500_000, 1_000_000, 0, -3_000_000])
     with AtiNetFTSensor(*device.address) as s:
         w = s.buffer.wait_newer(s.latest().seq, timeout=2.0).value
@@ -260,7 +260,7 @@ def test_netft_default_scaling_and_rdt_commands(device: FakeFTDevice) -> None:
     assert device.bad_requests == 0
 
 
-def test_netft_custom_counts_tare_and_malformed(device: FakeFTDevice) -> None:
+def test_netft_custom_counts_tare_and_malformed(device: SimulatedHexBox) -> None:
     device.counts = np.array([3000, 0, 0, 0, 0, 0])
     with AtiNetFTSensor(*device.address, counts_per_force=1000, counts_per_torque=1e6) as s:
         assert s.buffer.wait_newer(s.latest().seq, timeout=2.0).value.force[0] == pytest.approx(3.0)
@@ -287,7 +287,7 @@ def test_constructor_validation() -> None:
     np.testing.assert_array_equal(s.bias.torque, [0.1, 0.2, 0.3])
 
 
-def test_control_loop_reads_never_block_while_streaming(device: FakeFTDevice) -> None:
+def test_control_loop_reads_never_block_while_streaming(device: SimulatedHexBox) -> None:
     """A 1 kHz loop's per-cycle read (get_fresh) costs microseconds, even with the reader busy."""
     with OnRobotHexSensor(*device.address) as s:
         worst = 0.0
@@ -391,7 +391,7 @@ def test_drain_skips_malformed_and_status_error_records_and_keeps_the_newest_val
         s.stop()
 
 
-def test_polled_tare_drains_by_itself(device: FakeFTDevice) -> None:
+def test_polled_tare_drains_by_itself(device: SimulatedHexBox) -> None:
     device.counts = np.array([12000, -3000, 40000, 5000, 0, -7000])
     s = OnRobotHexSensor(*device.address).start_polled()
     try:

@@ -38,7 +38,7 @@ import numpy as np
 from hardware.support import MemoryLogger, QdProbe, rt_process, rt_spec
 
 from lapwrench.buffer import LatestValue
-from lapwrench.drivers.fakes import FakeFTDevice
+from lapwrench.drivers.simulated_hex import SimulatedHexBox
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
@@ -88,7 +88,7 @@ def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:
                 stop.wait(0.005)
 
         threading.Thread(target=grip, daemon=True).start()
-        with FakeFTDevice(rate_hz=1000.0, counts_fn=lambda i: np.r_[hand_force(robot_time()) * 1e4, 0, 0, 0]) as box:
+        with SimulatedHexBox(rate_hz=1000.0, counts_fn=lambda i: np.r_[hand_force(robot_time()) * 1e4, 0, 0, 0]) as box:
             rp.spec.ft = FtSpec("hex", "127.0.0.1", box.port, tare=True, tare_samples=50)
             rp.start()
             res = rp.run(5.5)

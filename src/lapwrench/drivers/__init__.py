@@ -9,7 +9,7 @@ newest :class:`Sample` and switches a source's wrench off when ``fresh(max_age)`
 * :mod:`~lapwrench.drivers.ft`: OnRobot HEX (compute box, EtherDAQ UDP) and ATI Net F/T (RDT UDP).
 * :mod:`~lapwrench.drivers.tactile`: 64-element tactile array over serial (pyserial).
 * :mod:`~lapwrench.drivers.camera`: laparoscope camera through OpenCV ``VideoCapture``.
-* :mod:`~lapwrench.drivers.fakes`: a loopback fake F/T box for tests and dry runs.
+* :mod:`~lapwrench.drivers.simulated_hex`: a simulated HEX box on loopback UDP for dry runs and tests.
 
 Typical use (one source shown)::
 
@@ -22,8 +22,8 @@ Typical use (one source shown)::
     ...
     ft.stop()
 
-The camera module (OpenCV) and the fakes are imported lazily on first attribute access, so
-``import lapwrench.drivers`` stays light for code that only needs the F/T or tactile readers.
+The camera module (OpenCV) and the simulated HEX box are imported lazily on first attribute access,
+so ``import lapwrench.drivers`` stays light for code that only needs the F/T or tactile readers.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ from lapwrench.drivers.tactile import (
 
 if TYPE_CHECKING:
     from lapwrench.drivers.camera import Camera, CameraFrame
-    from lapwrench.drivers.fakes import FakeFTDevice
+    from lapwrench.drivers.simulated_hex import SimulatedHexBox
 
 __all__ = [
     "AtiNetFTSensor",
@@ -68,7 +68,6 @@ __all__ = [
     "DeviceOpenError",
     "DeviceTimeoutError",
     "EndOfStream",
-    "FakeFTDevice",
     "LatestValue",
     "OnRobotHexSensor",
     "PacketError",
@@ -76,6 +75,7 @@ __all__ = [
     "RateStats",
     "Sample",
     "SerialTactileArray",
+    "SimulatedHexBox",
     "SourceStatus",
     "StatusError",
     "StreamingSource",
@@ -89,7 +89,7 @@ __all__ = [
 _LAZY = {
     "Camera": "lapwrench.drivers.camera",
     "CameraFrame": "lapwrench.drivers.camera",
-    "FakeFTDevice": "lapwrench.drivers.fakes",
+    "SimulatedHexBox": "lapwrench.drivers.simulated_hex",
 }
 
 

@@ -23,7 +23,7 @@ MCAP writer and the command line, and feeds the loop through shared memory. ``--
 the former single-process loop (threads beside the loop; for debugging only).
 
 ``--dry-run`` runs the same pipeline on :class:`~lapwrench.sim.robot.SimRobot`: a
-:class:`~lapwrench.drivers.fakes.FakeFTDevice` on 127.0.0.1 streams a scripted hand wrench that
+:class:`~lapwrench.drivers.simulated_hex.SimulatedHexBox` on 127.0.0.1 streams a scripted hand wrench that
 the simulation applies to the handle at the same time, and a pty carries a simulated tactile grip
 to the real :class:`~lapwrench.drivers.tactile.SerialTactileArray` reader. ``--frankysim`` does the
 same against franky-sim (started here, on 127.0.0.1) through pylibfranka, as an FR3.

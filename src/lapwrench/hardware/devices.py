@@ -178,12 +178,12 @@ def _open_sources(
     ft_url, tactile_port = args.ft, args.tactile
     fmt = getattr(args, "tactile_frame_format", None) or tactile_format(args, cfg)
     if script is not None:
-        from lapwrench.drivers.fakes import FakeFTDevice
+        from lapwrench.drivers.simulated_hex import SimulatedHexBox
 
         def counts(_i: int) -> np.ndarray:
             return _hex_counts(script.force_H())
 
-        fake = FakeFTDevice(rate_hz=1000.0, counts_fn=counts).start()
+        fake = SimulatedHexBox(rate_hz=1000.0, counts_fn=counts).start()
         devices.add(fake.close)
         ft_url = f"hex://127.0.0.1:{fake.port}"
         master, slave = os.openpty()
@@ -246,14 +246,14 @@ def _fake_ft_main(
 ) -> None:
     import multiprocessing as mp
 
-    from lapwrench.drivers.fakes import FakeFTDevice
+    from lapwrench.drivers.simulated_hex import SimulatedHexBox
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it: Ctrl-C and a closed terminal
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # reach the whole process group
     if fifo_priority:  # it stands for a device with a CPU of its own: keep it off our CPU contention
         with contextlib.suppress(OSError, AttributeError):
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo_priority))
-    dev = FakeFTDevice(rate_hz=rate_hz, counts_fn=functools.partial(_force_counts, force_fn, t0)).start()
+    dev = SimulatedHexBox(rate_hz=rate_hz, counts_fn=functools.partial(_force_counts, force_fn, t0)).start()
     try:
         conn.send(dev.port)
         parent = mp.parent_process()
@@ -265,7 +265,7 @@ def _fake_ft_main(
 
 
 class FakeFTProcess:
-    """A simulated OnRobot HEX box (:class:`~lapwrench.drivers.fakes.FakeFTDevice`, 10000 counts/N) in
+    """A simulated OnRobot HEX box (:class:`~lapwrench.drivers.simulated_hex.SimulatedHexBox`, 10000 counts/N) in
     its own process, streaming ``force_fn(t)`` (N, in {H}) at ``rate_hz`` on 127.0.0.1; ``t`` counts
     from :meth:`set_t0` (before it, ``-inf``). A real box does not share this process's interpreter,
     so neither does this one (its sends are not delayed by this process's threads). ``fifo_priority``

@@ -30,7 +30,7 @@ from lapwrench import loop
 from lapwrench.buffer import LatestValue
 from lapwrench.controller import Controller
 from lapwrench.hardware.log import CycleRecord, RunLogger
-from lapwrench.loop import Cycle, LoopStats
+from lapwrench.loop_stats import Cycle, LoopStats
 from lapwrench.robot_interface import RobotInterface
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent
 from lapwrench.sensors import InstrumentObservation

@@ -54,8 +54,9 @@ from lapwrench.perception.detection import (
     validate_frame,
 )
 from lapwrench.perception.evaluate import EvalResult, evaluate_detector, evaluate_predictions
-from lapwrench.perception.onnx_yolo import OnnxYoloDetector, OutputLayout, infer_layout
+from lapwrench.perception.onnx_yolo import OnnxYoloDetector
 from lapwrench.perception.ultralytics_backend import UltralyticsDetector
+from lapwrench.perception.yolo_layout import OutputLayout, infer_layout
 
 SHIPPED_MODEL = Path(__file__).resolve().parent.parent / "data" / "models" / "instruments.onnx"
 """The trained model shipped in the repository (exists in a source checkout / editable install)."""

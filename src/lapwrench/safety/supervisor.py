@@ -11,26 +11,11 @@ rest at the start pose), and checks them against the Franka limits. Then:
   limits, or breaks a velocity/acceleration/jerk limit is *replaced* by the next sample of a
   jerk-limited stop, an event is logged and the supervisor latches into a stop with an alarm.
   A controller that produced one bad command is not trusted for the next.
-* **Measured-state watches** (issue 9), the same in the simulation and on the robot; each one
-  holds the arm (the same smooth, jerk-limited stop) with an alarm naming the quantity and its
-  value. The caller measures them (:func:`measure_scope` at the robot's measured joints):
-
-  - ``rcm_error``: the RCM error from the *measured* joints, the distance (m) from the
-    controller's RCM point p_R to the scope axis, over ``max_rcm_error`` (default 5 mm);
-  - ``insertion_depth``: the measured depth (m) of the scope tip beyond p_R, outside
-    ``[depth_min, depth_max]`` (the envelope's depth range widened by ``safety.depth_tolerance``);
-  - ``residual_force``: the residual |ΔF| (eq 19, N; the handle F/T minus the robot's external
-    force estimate: the scope's force on the incision wall) over ``max_residual_force``;
-  - ``joints_nonfinite``: measured joints that are not finite numbers.
-
-  A non-finite measured value holds too. Build the thresholds from the YAML configuration with
+* **Measured-state watches** (issue 9), joint limits and deadlines: see
+  :mod:`lapwrench.safety.watches`. The caller measures the scope (:func:`measure_scope` at the
+  robot's measured joints); build the thresholds from the YAML configuration with
   :meth:`SupervisorConfig.from_config`. A controller's *reference* state never feeds these
   watches, nor does a simulator's ground truth.
-* **Joint limits.** A *measured* joint closer than ``joint_warn_margin`` to a limit logs an event;
-  closer than ``joint_stop_margin`` → stop and alarm (the shaper keeps the reference
-  ``position_margin`` inside, so this means the robot is not following).
-* **Deadlines.** A cycle whose compute time exceeds ``cycle_budget`` is a deadline miss (counted,
-  logged with rate limiting); ``max_consecutive_misses`` in a row → stop and alarm.
 * **Clean stop.** :meth:`stop` brings the reference to rest: each joint's acceleration is ramped
   at most ``jerk·dt`` per cycle towards ``-sign(v)·min(a_max, a_ramp(v))``, ``a_ramp`` the largest
   deceleration from which the acceleration can still be ramped back to zero in jerk steps exactly
@@ -42,194 +27,40 @@ rest at the start pose), and checks them against the Franka limits. Then:
 Events are structured :class:`SupervisorEvent` (time, kind, message) and kept in
 :attr:`SafetySupervisor.events` (bounded) and :attr:`SafetySupervisor.pending` (drained by the
 logger each cycle).
+
+The thresholds, states and events live in :mod:`lapwrench.safety.config`, the compiled checks and
+:func:`measure_scope` in :mod:`lapwrench.safety.checks`; every one of those names is importable
+from here.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
-from dataclasses import dataclass
-from enum import StrEnum
-from typing import Any
 
 import numpy as np
 
-from lapwrench.config import Config, EnvelopeConfig, SafetyConfig
-from lapwrench.jit import kernel
-from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.limits import JointLimits
-from lapwrench.robot.model import RobotModel
+from lapwrench.safety.checks import MeasuredScope, command_violation, measure_scope, nearest_limit
+from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
+from lapwrench.safety.watches import CONTROLLER_STOP_TIMEOUT, SupervisorWatches
 from lapwrench.spatial import Vec
 
-# Seconds a braking controller (TickResult.rcm_infeasible) may take to reach rest before the hold.
-CONTROLLER_STOP_TIMEOUT = 1.0
+__all__ = [
+    "CONTROLLER_STOP_TIMEOUT",
+    "MeasuredScope",
+    "SafetySupervisor",
+    "SupervisorConfig",
+    "SupervisorEvent",
+    "SupervisorState",
+    "command_violation",
+    "measure_scope",
+    "nearest_limit",
+]
 
 
-def _measured_bounds(safety: SafetyConfig, envelope: EnvelopeConfig) -> dict[str, float]:
-    """The supervisor's measured-state bounds from the config sections (m, m, m, N)."""
-    return {
-        "max_rcm_error": safety.max_rcm_error,
-        "depth_min": envelope.depth_min - safety.depth_tolerance,
-        "depth_max": envelope.depth_max + safety.depth_tolerance,
-        "max_residual_force": safety.max_residual_force,
-        "residual_force_time": safety.residual_force_time,
-    }
-
-
-_DEFAULT_BOUNDS = _measured_bounds(SafetyConfig(), EnvelopeConfig())  # those of data/default.yaml
-
-
-class SupervisorState(StrEnum):
-    """``running``: commands pass; ``stopping``: braking to rest; ``holding``: at rest, holding."""
-
-    RUNNING = "running"
-    STOPPING = "stopping"
-    HOLDING = "holding"
-
-
-@dataclass(frozen=True)
-class SupervisorEvent:
-    """One supervisor event. ``time`` is the loop's session time (s)."""
-
-    time: float
-    kind: str
-    message: str
-
-
-@dataclass(frozen=True)
-class SupervisorConfig:
-    """Supervisor thresholds.
-
-    The measured-state bounds default to the shipped ``safety`` and ``envelope`` sections; build a
-    loop's configuration with :meth:`from_config` so every loop reads them from the YAML the same way.
-
-    Attributes:
-        check_fraction: Fraction of the Franka velocity/acceleration/jerk limits a command may use
-            (1.0: the hard limits; the controller's shaper uses ``robot.limit_fraction`` < 1).
-        stop_fraction: Fraction of the limits used by the stop trajectory.
-        position_tolerance: Slack (rad) on the position-limit check of commands.
-        max_rcm_error: Measured RCM error (m) above which the robot holds with an alarm.
-        depth_min: Measured insertion depth (m) below which the robot holds with an alarm.
-        depth_max: Measured insertion depth (m) above which the robot holds with an alarm.
-        max_residual_force: Residual |ΔF| (N, eq 19) above which the robot holds with an alarm ...
-        residual_force_time: ... once it has stayed above for this long (s): the robot's force
-            estimate lags the handle sensor, so a hand letting go of 30 N at once shows |ΔF| of
-            ~26 N for about 25 ms without any load on the wall. A non-finite |ΔF| holds at once.
-        joint_warn_margin: Measured distance (rad) to a joint limit that logs an event.
-        joint_stop_margin: Measured distance (rad) to a joint limit that stops with an alarm.
-        cycle_budget: Compute time (s) allowed per cycle; more is a deadline miss.
-        max_consecutive_misses: Deadline misses in a row that stop with an alarm (0: never).
-        rest_velocity: Velocity (rad/s) under which, with the acceleration ramped out, a stopping
-            reference counts as at rest.
-        max_events: Events kept in memory.
-    """
-
-    check_fraction: float = 1.0
-    stop_fraction: float = 0.9
-    position_tolerance: float = 1e-6
-    max_rcm_error: float = _DEFAULT_BOUNDS["max_rcm_error"]
-    depth_min: float = _DEFAULT_BOUNDS["depth_min"]
-    depth_max: float = _DEFAULT_BOUNDS["depth_max"]
-    max_residual_force: float = _DEFAULT_BOUNDS["max_residual_force"]
-    residual_force_time: float = _DEFAULT_BOUNDS["residual_force_time"]
-    joint_warn_margin: float = 0.04
-    joint_stop_margin: float = 0.01
-    cycle_budget: float = 0.0008
-    max_consecutive_misses: int = 20
-    rest_velocity: float = 1e-4
-    max_events: int = 10_000
-
-    def __post_init__(self) -> None:
-        for name in (
-            "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "cycle_budget", "rest_velocity"
-        ):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"supervisor.{name} must be positive, got {v!r}")
-        if self.check_fraction > 1.0 or self.stop_fraction > 1.0:
-            raise ValueError("supervisor check_fraction and stop_fraction must be <= 1")
-        if not (math.isfinite(self.depth_min) and math.isfinite(self.depth_max) and self.depth_min < self.depth_max):
-            raise ValueError(f"need finite depth_min < depth_max, got {self.depth_min!r}, {self.depth_max!r}")
-        if not 0 <= self.joint_stop_margin <= self.joint_warn_margin:
-            raise ValueError("need 0 <= joint_stop_margin <= joint_warn_margin")
-        if self.max_consecutive_misses < 0:
-            raise ValueError("max_consecutive_misses must be >= 0")
-
-    @classmethod
-    def from_config(cls, cfg: Config, **overrides: Any) -> SupervisorConfig:
-        """The measured-state bounds of ``cfg.safety`` and ``cfg.envelope``; ``overrides`` set the
-        other thresholds (or replace a bound)."""
-        return cls(**{**_measured_bounds(cfg.safety, cfg.envelope), **overrides})
-
-
-@dataclass(frozen=True)
-class MeasuredScope:
-    """The scope against the RCM point at the measured joints: ``rcm_error`` (m, distance from p_R
-    to the scope axis, eq 27) and ``depth`` (m of scope tip beyond p_R along the shaft)."""
-
-    rcm_error: float
-    depth: float
-
-
-def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope:
-    """RCM error and insertion depth at the robot's *measured* joints, for the controller's p_R.
-
-    One forward kinematics pass (:meth:`RobotModel.scope_axis_at`) and the formulas of
-    :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values
-    and arrays of the wrong shape give NaN (the supervisor then holds).
-    """
-    q = np.asarray(q_measured, dtype=float)
-    p = np.asarray(p_R, dtype=float)
-    if q.shape != (7,) or p.shape != (3,):
-        return MeasuredScope(math.nan, math.nan)
-    axis = model.scope_axis_at(q)
-    e, depth = axis_rcm_error_and_depth(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))
-    return MeasuredScope(float(e), float(depth))
-
-
-@kernel
-def command_violation(
-    q: Vec, q_prev: Vec, v_prev: Vec, a_prev: Vec, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec,
-    j_max: Vec, dt: float,
-) -> tuple[int, int, float]:
-    """The first limit the command ``q`` breaks after the history (q, v, a) as libfranka differentiates
-    it: (0 none | 1 position | 2 velocity | 3 acceleration | 4 jerk, joint, value)."""
-    n = q.shape[0]
-    for j in range(n):
-        if q[j] < lo[j] - tol or q[j] > hi[j] + tol:
-            return 1, j, q[j]
-    v = (q - q_prev) / dt
-    a = (v - v_prev) / dt
-    jk = (a - a_prev) / dt
-    for code, value, limit in ((2, v, v_max), (3, a, a_max), (4, jk, j_max)):
-        worst, jw = 0.0, 0
-        for j in range(n):
-            r = abs(value[j]) / limit[j]
-            if r > worst:
-                worst, jw = r, j
-        if worst > 1.0 + 1e-9:
-            return code, jw, value[jw]
-    return 0, 0, 0.0
-
-
-@kernel
-def nearest_limit(q: Vec, lo: Vec, hi: Vec) -> tuple[int, float]:
-    """The joint nearest to one of its limits and its room (rad)."""
-    jm, room = 0, np.inf
-    for j in range(q.shape[0]):
-        r = min(q[j] - lo[j], hi[j] - q[j])
-        if r < room:
-            jm, room = j, r
-    return jm, room
-
-
-def _rate_limited(count: int) -> bool:
-    """Log the first 10 occurrences, then every 1000th."""
-    return count <= 10 or count % 1000 == 0
-
-
-class SafetySupervisor:
-    """Validates, and if needed replaces, every command; watches measured state and deadlines.
+class SafetySupervisor(SupervisorWatches):
+    """Validates, and if needed replaces, every command; watches measured state and deadlines
+    (:class:`~lapwrench.safety.watches.SupervisorWatches`).
 
     Args:
         limits: The robot's joint limits (:attr:`lapwrench.robot.model.RobotModel.limits`).
@@ -238,7 +69,7 @@ class SafetySupervisor:
     """
 
     def __init__(self, limits: JointLimits, dt: float, config: SupervisorConfig | None = None) -> None:
-        self.cfg = config or SupervisorConfig()
+        super().__init__(config or SupervisorConfig(), limits.position_lower, limits.position_upper)
         self.dt = float(dt)
         self.limits = limits
         c = self.cfg
@@ -248,20 +79,7 @@ class SafetySupervisor:
         stop = limits.scaled(c.stop_fraction)
         self._stop_a = stop.acceleration
         self._stop_j = stop.jerk
-        self._lo = limits.position_lower
-        self._hi = limits.position_upper
-        self.events: deque[SupervisorEvent] = deque(maxlen=c.max_events)
-        self.pending: list[SupervisorEvent] = []
-        self.state = SupervisorState.HOLDING
-        self.alarm = False
-        self.alarm_reason: str | None = None
-        self.deadline_misses = 0
-        self.consecutive_misses = 0
         self.replaced_commands = 0
-        self._counts: dict[str, int] = {}
-        self._joint_warned = False
-        self._residual_over_since: float | None = None
-        self._controller_stop_since: float | None = None
         self._q = np.zeros(7)
         self._v = np.zeros(7)
         self._a = np.zeros(7)
@@ -295,40 +113,6 @@ class SafetySupervisor:
     def at_rest(self) -> bool:
         """True once a stop has completed (the reference is constant)."""
         return self.state is SupervisorState.HOLDING
-
-    def event(self, time: float, kind: str, message: str) -> SupervisorEvent:
-        """Record an event."""
-        ev = SupervisorEvent(float(time), kind, message)
-        self.events.append(ev)
-        self.pending.append(ev)
-        return ev
-
-    def counted_event(self, time: float, kind: str, message: str) -> None:
-        """Record a repeated event, rate-limited (first 10, then every 1000th), counting all."""
-        n = self._counts.get(kind, 0) + 1
-        self._counts[kind] = n
-        if _rate_limited(n):
-            self.event(time, kind, f"{message} (occurrence {n})")
-
-    def drain_events(self) -> list[SupervisorEvent]:
-        """Events since the last call (for the logger)."""
-        out, self.pending = self.pending, []
-        return out
-
-    def raise_alarm(self, time: float, kind: str, message: str) -> None:
-        """Stop with an alarm (idempotent for the alarm reason: the first one is kept)."""
-        if not self.alarm:
-            self.alarm, self.alarm_reason = True, f"{kind}: {message}"
-        self.event(time, kind, message)
-        if self.state is SupervisorState.RUNNING:
-            self.state = SupervisorState.STOPPING
-            self.event(time, "stop", f"stopping ({kind})")
-
-    def stop(self, time: float, reason: str = "stop requested") -> None:
-        """Begin a clean stop to rest (no alarm). Keep calling :meth:`filter` until :attr:`at_rest`."""
-        if self.state is SupervisorState.RUNNING:
-            self.state = SupervisorState.STOPPING
-            self.event(time, "stop", reason)
 
     # -- checks -------------------------------------------------------------------------------
     def check_command(self, q_cmd: object) -> tuple[str, str] | None:
@@ -393,81 +177,6 @@ class SafetySupervisor:
             # rest_velocity/dt in acceleration) and a -> 0 on the next cycle
             self.state = SupervisorState.HOLDING
         return self._q.copy()
-
-    # -- measured-state watches ---------------------------------------------------------------
-    def _hold(self, time: float, kind: str, message: str) -> None:
-        """Hold with an alarm on a measured quantity (the first alarm of a run is the one kept;
-        later excursions while already stopping on an alarm are not re-logged every cycle)."""
-        if not self.alarm:
-            self.raise_alarm(time, kind, f"{message}; holding")
-
-    def _watch_joints(self, time: float, q_measured: Vec) -> None:
-        c = self.cfg
-        qm = np.ascontiguousarray(q_measured, dtype=np.float64)
-        if qm.shape != (7,) or not math.isfinite(qm.sum()):
-            self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
-            return
-        j, room = nearest_limit(qm, self._lo, self._hi)
-        if room < c.joint_stop_margin:
-            if self.state is SupervisorState.RUNNING:
-                self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")
-        elif room < c.joint_warn_margin:
-            if not self._joint_warned:
-                self.event(time, "joint_limit_near", f"joint {j + 1} measured {room:.4f} rad from its limit")
-                self._joint_warned = True
-        else:
-            self._joint_warned = False
-
-    def _watch_scope(self, time: float, rcm_error: float | None, depth: float | None, residual: Vec | None) -> None:
-        c = self.cfg
-        if rcm_error is not None and not (rcm_error <= c.max_rcm_error):  # NaN fails the test too
-            self._hold(
-                time, "rcm_error", f"measured RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm"
-            )
-        if depth is not None and not (c.depth_min <= depth <= c.depth_max):
-            self._hold(
-                time,
-                "insertion_depth",
-                f"measured insertion depth {depth * 1e3:.1f} mm outside "
-                f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
-            )
-        if residual is not None:
-            f = float(np.linalg.norm(np.asarray(residual, dtype=float)))
-            over = not (f <= c.max_residual_force)
-            if not over:
-                self._residual_over_since = None
-            elif self._residual_over_since is None:
-                self._residual_over_since = time
-            if over and (not math.isfinite(f) or time - self._residual_over_since >= c.residual_force_time - 1e-9):
-                self._hold(
-                    time,
-                    "residual_force",
-                    f"measured residual force |ΔF| {f:.1f} N > {c.max_residual_force:.1f} N"
-                    f" for {(time - self._residual_over_since) * 1e3:.0f} ms",
-                )
-
-    def _watch_controller_stop(self, time: float, stopping: bool) -> None:
-        if not stopping or self.state is not SupervisorState.RUNNING:
-            return
-        if self._controller_stop_since is None:
-            self._controller_stop_since = time
-            self.event(time, "rcm_infeasible", "the RCM task cannot be kept inside the joint limits; braking")
-        at_rest = float(np.max(np.abs(self._v))) < 10.0 * self.cfg.rest_velocity
-        if at_rest or time - self._controller_stop_since >= CONTROLLER_STOP_TIMEOUT:
-            self._hold(time, "rcm_infeasible", "the RCM task could not be kept inside the joint limits")
-
-    def _watch_deadline(self, time: float, compute_time: float) -> None:
-        c = self.cfg
-        if compute_time > c.cycle_budget:
-            self.deadline_misses += 1
-            self.consecutive_misses += 1
-            self.counted_event(
-                time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
-            )
-            if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
-                self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
-        else:
-            self.consecutive_misses = 0
 
     # -- the gate -----------------------------------------------------------------------------
     def filter(

@@ -1,12 +1,9 @@
-"""Loopback stand-ins for the sensor hardware (tests, ``--dry-run``, benchmarks).
+"""A simulated OnRobot HEX compute box on loopback UDP (``run --dry-run``, tests, benchmarks).
 
-:class:`FakeFTDevice` is a UDP peer that behaves like an OnRobot HEX compute box or an ATI Net F/T
-box: it answers the 0x1234 start command by streaming 36-byte records to the requesting address at
-a fixed rate, honours stop/bias commands, and can inject malformed datagrams, sequence gaps,
-duplicates, non-zero status words and pauses (to make the host-side data go stale).
-
-:func:`write_tactile_stream` helps drive a serial peer (pty master or ``loop://``) with frames
-encoded by :class:`~lapwrench.drivers.tactile.TactileFrameFormat`.
+:class:`SimulatedHexBox` is a UDP peer that behaves like an OnRobot HEX compute box or an ATI Net
+F/T box: it answers the 0x1234 start command by streaming 36-byte records to the requesting
+address at a fixed rate, honours stop/bias commands, and can inject malformed datagrams, sequence
+gaps, duplicates, non-zero status words and pauses (to make the host-side data go stale).
 
 Everything binds to 127.0.0.1 by default; the port is ephemeral unless given.
 """
@@ -34,12 +31,12 @@ from lapwrench.drivers.ft import (
     unpack_request,
 )
 
-__all__ = ["FakeFTDevice"]
+__all__ = ["SimulatedHexBox"]
 
 CountsFn = Callable[[int], ArrayLike]
 
 
-class FakeFTDevice:
+class SimulatedHexBox:
     """A UDP F/T box on loopback speaking the RDT/EtherDAQ protocol.
 
     Args:
@@ -90,7 +87,7 @@ class FakeFTDevice:
         self._dup = 0
         self._bias = np.zeros(6, dtype=np.int64)
         self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name="fake-ft-device", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="simulated-hex-box", daemon=True)
 
     # ----------------------------------------------------------------- control
     def start(self) -> Self:

@@ -1,0 +1,84 @@
+"""The supervisor's compiled checks and its measurement of the scope at the measured joints.
+
+* :func:`command_violation`: the first limit (position, velocity, acceleration, jerk) a joint
+  command breaks after the history of commands sent, differentiated as libfranka does;
+* :func:`nearest_limit`: the measured joint closest to one of its limits;
+* :func:`measure_scope`: the RCM error and insertion depth at the robot's *measured* joints.
+
+The first two are numba kernels (:func:`lapwrench.jit.kernel`), called every cycle by
+:class:`~lapwrench.safety.supervisor.SafetySupervisor`; :func:`measure_scope` is called by every
+control loop to feed the supervisor's measured-state watches.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lapwrench.jit import kernel
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth
+from lapwrench.robot.model import RobotModel
+from lapwrench.spatial import Vec
+
+
+@dataclass(frozen=True)
+class MeasuredScope:
+    """The scope against the RCM point at the measured joints: ``rcm_error`` (m, distance from p_R
+    to the scope axis, eq 27) and ``depth`` (m of scope tip beyond p_R along the shaft)."""
+
+    rcm_error: float
+    depth: float
+
+
+def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope:
+    """RCM error and insertion depth at the robot's *measured* joints, for the controller's p_R.
+
+    One forward kinematics pass (:meth:`RobotModel.scope_axis_at`) and the formulas of
+    :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values
+    and arrays of the wrong shape give NaN (the supervisor then holds).
+    """
+    q = np.asarray(q_measured, dtype=float)
+    p = np.asarray(p_R, dtype=float)
+    if q.shape != (7,) or p.shape != (3,):
+        return MeasuredScope(math.nan, math.nan)
+    axis = model.scope_axis_at(q)
+    e, depth = axis_rcm_error_and_depth(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))
+    return MeasuredScope(float(e), float(depth))
+
+
+@kernel
+def command_violation(
+    q: Vec, q_prev: Vec, v_prev: Vec, a_prev: Vec, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec,
+    j_max: Vec, dt: float,
+) -> tuple[int, int, float]:
+    """The first limit the command ``q`` breaks after the history (q, v, a) as libfranka differentiates
+    it: (0 none | 1 position | 2 velocity | 3 acceleration | 4 jerk, joint, value)."""
+    n = q.shape[0]
+    for j in range(n):
+        if q[j] < lo[j] - tol or q[j] > hi[j] + tol:
+            return 1, j, q[j]
+    v = (q - q_prev) / dt
+    a = (v - v_prev) / dt
+    jk = (a - a_prev) / dt
+    for code, value, limit in ((2, v, v_max), (3, a, a_max), (4, jk, j_max)):
+        worst, jw = 0.0, 0
+        for j in range(n):
+            r = abs(value[j]) / limit[j]
+            if r > worst:
+                worst, jw = r, j
+        if worst > 1.0 + 1e-9:
+            return code, jw, value[jw]
+    return 0, 0, 0.0
+
+
+@kernel
+def nearest_limit(q: Vec, lo: Vec, hi: Vec) -> tuple[int, float]:
+    """The joint nearest to one of its limits and its room (rad)."""
+    jm, room = 0, np.inf
+    for j in range(q.shape[0]):
+        r = min(q[j] - lo[j], hi[j] - q[j])
+        if r < room:
+            jm, room = j, r
+    return jm, room

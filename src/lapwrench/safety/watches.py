@@ -1,0 +1,176 @@
+"""The supervisor's event log, alarm latch and measured-state watches (issue 9).
+
+:class:`SupervisorWatches` is the base of :class:`~lapwrench.safety.supervisor.SafetySupervisor`:
+it records structured events (:attr:`~SupervisorWatches.events`, bounded, and
+:attr:`~SupervisorWatches.pending`, drained by the logger each cycle), latches the first alarm and
+switches to a stop, and watches what the caller measured, the same in the simulation and on the
+robot. Each watch holds the arm (the supervisor's smooth, jerk-limited stop) with an alarm naming
+the quantity and its value:
+
+* ``rcm_error``, ``insertion_depth``, ``residual_force``, ``joints_nonfinite``: the measured RCM
+  error, insertion depth, residual |ΔF| (eq 19) and joints against :class:`SupervisorConfig`; a
+  non-finite value holds too;
+* **joint limits**: a *measured* joint closer than ``joint_warn_margin`` to a limit logs an event,
+  closer than ``joint_stop_margin`` stops with an alarm;
+* **deadlines**: a cycle over ``cycle_budget`` is a deadline miss (counted, logged with rate
+  limiting); ``max_consecutive_misses`` in a row stop with an alarm;
+* **controller stop**: a controller braking because the RCM task left the joint limits may reach
+  rest (or run for :data:`CONTROLLER_STOP_TIMEOUT`), then the arm holds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from lapwrench.safety.checks import nearest_limit
+from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
+from lapwrench.spatial import Vec
+
+# Seconds a braking controller (TickResult.rcm_infeasible) may take to reach rest before the hold.
+CONTROLLER_STOP_TIMEOUT = 1.0
+
+
+def _rate_limited(count: int) -> bool:
+    """Log the first 10 occurrences, then every 1000th."""
+    return count <= 10 or count % 1000 == 0
+
+
+class SupervisorWatches:
+    """Events, the alarm latch and the measured-state watches of the safety supervisor.
+
+    Args:
+        config: Thresholds (:class:`SupervisorConfig`).
+        lo: Lower joint position limits (rad).
+        hi: Upper joint position limits (rad).
+    """
+
+    _v: Vec  # velocity of the last command sent, kept by the SafetySupervisor subclass
+
+    def __init__(self, config: SupervisorConfig, lo: Vec, hi: Vec) -> None:
+        self.cfg = config
+        self._lo = lo
+        self._hi = hi
+        self.events: deque[SupervisorEvent] = deque(maxlen=config.max_events)
+        self.pending: list[SupervisorEvent] = []
+        self.state = SupervisorState.HOLDING
+        self.alarm = False
+        self.alarm_reason: str | None = None
+        self.deadline_misses = 0
+        self.consecutive_misses = 0
+        self._counts: dict[str, int] = {}
+        self._joint_warned = False
+        self._residual_over_since: float | None = None
+        self._controller_stop_since: float | None = None
+
+    # -- events and the alarm -----------------------------------------------------------------
+    def event(self, time: float, kind: str, message: str) -> SupervisorEvent:
+        """Record an event."""
+        ev = SupervisorEvent(float(time), kind, message)
+        self.events.append(ev)
+        self.pending.append(ev)
+        return ev
+
+    def counted_event(self, time: float, kind: str, message: str) -> None:
+        """Record a repeated event, rate-limited (first 10, then every 1000th), counting all."""
+        n = self._counts.get(kind, 0) + 1
+        self._counts[kind] = n
+        if _rate_limited(n):
+            self.event(time, kind, f"{message} (occurrence {n})")
+
+    def drain_events(self) -> list[SupervisorEvent]:
+        """Events since the last call (for the logger)."""
+        out, self.pending = self.pending, []
+        return out
+
+    def raise_alarm(self, time: float, kind: str, message: str) -> None:
+        """Stop with an alarm (idempotent for the alarm reason: the first one is kept)."""
+        if not self.alarm:
+            self.alarm, self.alarm_reason = True, f"{kind}: {message}"
+        self.event(time, kind, message)
+        if self.state is SupervisorState.RUNNING:
+            self.state = SupervisorState.STOPPING
+            self.event(time, "stop", f"stopping ({kind})")
+
+    def stop(self, time: float, reason: str = "stop requested") -> None:
+        """Begin a clean stop to rest (no alarm). Keep calling :meth:`filter` until :attr:`at_rest`."""
+        if self.state is SupervisorState.RUNNING:
+            self.state = SupervisorState.STOPPING
+            self.event(time, "stop", reason)
+
+    # -- measured-state watches ---------------------------------------------------------------
+    def _hold(self, time: float, kind: str, message: str) -> None:
+        """Hold with an alarm on a measured quantity (the first alarm of a run is the one kept;
+        later excursions while already stopping on an alarm are not re-logged every cycle)."""
+        if not self.alarm:
+            self.raise_alarm(time, kind, f"{message}; holding")
+
+    def _watch_joints(self, time: float, q_measured: Vec) -> None:
+        c = self.cfg
+        qm = np.ascontiguousarray(q_measured, dtype=np.float64)
+        if qm.shape != (7,) or not math.isfinite(qm.sum()):
+            self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
+            return
+        j, room = nearest_limit(qm, self._lo, self._hi)
+        if room < c.joint_stop_margin:
+            if self.state is SupervisorState.RUNNING:
+                self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")
+        elif room < c.joint_warn_margin:
+            if not self._joint_warned:
+                self.event(time, "joint_limit_near", f"joint {j + 1} measured {room:.4f} rad from its limit")
+                self._joint_warned = True
+        else:
+            self._joint_warned = False
+
+    def _watch_scope(self, time: float, rcm_error: float | None, depth: float | None, residual: Vec | None) -> None:
+        c = self.cfg
+        if rcm_error is not None and not (rcm_error <= c.max_rcm_error):  # NaN fails the test too
+            self._hold(
+                time, "rcm_error", f"measured RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm"
+            )
+        if depth is not None and not (c.depth_min <= depth <= c.depth_max):
+            self._hold(
+                time,
+                "insertion_depth",
+                f"measured insertion depth {depth * 1e3:.1f} mm outside "
+                f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
+            )
+        if residual is not None:
+            f = float(np.linalg.norm(np.asarray(residual, dtype=float)))
+            over = not (f <= c.max_residual_force)
+            if not over:
+                self._residual_over_since = None
+            elif self._residual_over_since is None:
+                self._residual_over_since = time
+            if over and (not math.isfinite(f) or time - self._residual_over_since >= c.residual_force_time - 1e-9):
+                self._hold(
+                    time,
+                    "residual_force",
+                    f"measured residual force |ΔF| {f:.1f} N > {c.max_residual_force:.1f} N"
+                    f" for {(time - self._residual_over_since) * 1e3:.0f} ms",
+                )
+
+    def _watch_controller_stop(self, time: float, stopping: bool) -> None:
+        if not stopping or self.state is not SupervisorState.RUNNING:
+            return
+        if self._controller_stop_since is None:
+            self._controller_stop_since = time
+            self.event(time, "rcm_infeasible", "the RCM task cannot be kept inside the joint limits; braking")
+        at_rest = float(np.max(np.abs(self._v))) < 10.0 * self.cfg.rest_velocity
+        if at_rest or time - self._controller_stop_since >= CONTROLLER_STOP_TIMEOUT:
+            self._hold(time, "rcm_infeasible", "the RCM task could not be kept inside the joint limits")
+
+    def _watch_deadline(self, time: float, compute_time: float) -> None:
+        c = self.cfg
+        if compute_time > c.cycle_budget:
+            self.deadline_misses += 1
+            self.consecutive_misses += 1
+            self.counted_event(
+                time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
+            )
+            if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
+                self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
+        else:
+            self.consecutive_misses = 0
