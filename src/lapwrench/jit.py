@@ -25,6 +25,7 @@ import os
 import shutil
 import tempfile
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -81,6 +82,9 @@ def _prune(root: Path, keep: str) -> None:
 
 
 numba.config.CACHE_DIR = str(cache_dir())
+# numba's hints that '@' is faster on contiguous arrays are for developers (bench/tick.py measures the
+# tick); a user compiling on first use must not see them between the command's own lines
+warnings.filterwarnings("ignore", category=numba.core.errors.NumbaPerformanceWarning)
 
 
 def kernel(fn: F) -> F:

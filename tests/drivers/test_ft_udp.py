@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import socket
 import threading
 import time
@@ -245,6 +246,28 @@ def test_closed_port_gives_clear_error() -> None:
         s.start()
     assert str(port) in str(info.value)
     assert not s.running
+
+
+def test_errors_before_the_first_record_are_one_error_not_a_warning_each(caplog: pytest.LogCaptureFixture) -> None:
+    """A box that never answers: start() fails with the counts and the last error, and nothing is
+    logged per retry (it printed five warning lines before the one-line error)."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    s = OnRobotHexSensor("127.0.0.1", port, start_timeout=0.3)
+    with caplog.at_level(logging.WARNING, logger="lapwrench.drivers"), pytest.raises(DeviceTimeoutError) as info:
+        s.start()
+    assert "io_errors=" in str(info.value) and "last error" in str(info.value)
+    assert not [r for r in caplog.records if r.name.startswith("lapwrench.drivers")]
+
+
+def test_errors_after_streaming_are_logged(device: SimulatedHexBox, caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="lapwrench.drivers"), OnRobotHexSensor(*device.address) as s:
+        assert s.buffer.wait_newer(0, timeout=2.0) is not None
+        device.inject([b"\x01\x02\x03"])
+        assert wait_until(lambda: s.status().malformed >= 1)
+    assert any("malformed" in r.getMessage() for r in caplog.records)
 
 
 # --------------------------------------------------------------------------- ATI Net F/T

@@ -11,6 +11,11 @@ A :class:`StreamingSource` owns one device connection and one reader thread. Its
    * Any other exception (I/O failure, device gone) is counted as an I/O error, reported, and
      retried after a short back-off; the thread keeps running and the data simply goes stale.
    * :class:`EndOfStream` (e.g. the end of a video file) ends the thread cleanly.
+
+   Warnings are logged (rate-limited) only once the device has streamed a first value: before
+   that, the start-up check that waits for one (e.g. the F/T box's first record) fails with one
+   error that carries the counts and the last error, so a device that never answers gives one
+   line, not a warning per retry.
 3. ``stop()`` sets the stop event, lets the subclass interrupt blocking calls, joins the thread
    with a timeout and releases the device. It is idempotent; sources are also context managers.
 
@@ -146,6 +151,7 @@ class StreamingSource(ABC, Generic[T]):
         self._malformed = 0
         self._io_errors = 0
         self._last_error: str | None = None
+        self._streamed = False  # a first value was published: errors are logged from then on
         self.errors: deque[tuple[float, str]] = deque(maxlen=32)
         """Most recent (monotonic time, message) error events, newest last."""
 
@@ -273,6 +279,12 @@ class StreamingSource(ABC, Generic[T]):
         """Store ``value`` in the buffer and record the arrival in the rate monitor."""
         self.buffer.put(value, timestamp)
         self.rate.tick(timestamp)
+        self._streamed = True
+
+    def _warn(self, n: int, msg: str) -> None:
+        """Log the ``n``-th error of a kind, rate-limited, once the device has streamed (module docstring)."""
+        if self._streamed and _log_now(n):
+            log.warning("%s: %s (total %d)", self.name, msg, n)
 
     def _record_malformed(self, exc: Exception) -> None:
         msg = f"malformed: {exc}"
@@ -281,8 +293,7 @@ class StreamingSource(ABC, Generic[T]):
             n = self._malformed
             self._last_error = msg
         self.errors.append((time.monotonic(), msg))
-        if _log_now(n):
-            log.warning("%s: %s (total %d)", self.name, msg, n)
+        self._warn(n, msg)
 
     def _record_io_error(self, exc: BaseException) -> None:
         msg = f"I/O error: {type(exc).__name__}: {exc}"
@@ -291,8 +302,7 @@ class StreamingSource(ABC, Generic[T]):
             n = self._io_errors
             self._last_error = msg
         self.errors.append((time.monotonic(), msg))
-        if _log_now(n):
-            log.warning("%s: %s (total %d)", self.name, msg, n)
+        self._warn(n, msg)
 
     def _run(self) -> None:
         try:
