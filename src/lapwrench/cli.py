@@ -49,7 +49,7 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     out = _writable_dir(Path(args.out))
     ctrl = Controller(cfg)
     ctrl.reset(DEFAULT_Q0)
-    kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
+    kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(ctrl.model.nv))
     depth = 0.07
     # an instrument tip sliding over tissue 7 cm ahead of the camera
     centre = kin.p_C + depth * kin.d_z

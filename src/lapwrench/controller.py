@@ -144,7 +144,7 @@ class Controller:
         z = np.zeros(3)
         frame = SensorFrame(
             0.0, ForceTorqueReading(np.array([1.0, 0.0, 0.0]), z, 0.0), TactileReading(np.full(64, 50.0), 0.0),
-            InstrumentObservation(np.array([[100.0, 100.0]]), 0.0), RobotReading(q, np.zeros(7), z, 0.0),
+            InstrumentObservation(np.array([[100.0, 100.0]]), 0.0), RobotReading(q, np.zeros(self.model.nv), z, 0.0),
         )
         hook, self.bounds_hook = self.bounds_hook, lambda ref, lo, hi: (lo, lo + 1e-3)  # a narrow box: a QP
         try:
@@ -161,20 +161,22 @@ class Controller:
         """Start at rest at ``q0``; the RCM point is eq (18) unless ``p_R`` is given. Binds and warms up
         the compiled tick (seconds on a fresh install while numba compiles, milliseconds from its cache)."""
         q0 = np.asarray(q0, dtype=float)
-        if q0.shape != (7,) or not np.all(np.isfinite(q0)):
-            raise ValueError("initial configuration must be 7 finite joint positions")
+        n = self.model.nq
+        if q0.shape != (n,) or not np.all(np.isfinite(q0)):
+            raise ValueError(f"initial configuration must be {n} finite joint positions")
         lim = self.model.limits
         if np.any(q0 < lim.position_lower) or np.any(q0 > lim.position_upper):
             raise ValueError("initial configuration is outside the joint limits")
-        self.ref = ReferenceState(q0.copy(), np.zeros(7), np.zeros(7))
-        kin = self.model.kinematics(q0, np.zeros(7))
+        rest = np.zeros(self.model.nv)
+        self.ref = ReferenceState(q0.copy(), rest.copy(), rest.copy())
+        kin = self.model.kinematics(q0, rest)
         if p_R is None:
             p_R = initial_rcm_point(kin, self.cfg.scope.length, self.cfg.scope.lambda0)
         self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
         self.envelope.reset(kin)
         self.feedback.reset()
         self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.extra_sources)
-        terms = self.model.terms(q0, np.zeros(7))
+        terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
         self.compiled.bind(terms, self.model.mass_matrix_inverse(q0), self.envelope.R_E0)
         self.stopping = False

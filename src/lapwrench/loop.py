@@ -285,8 +285,9 @@ class ControlLoop:
         if not self._started:
             self.start()
         sup, dt = self.supervisor, self.robot.dt
-        q_start = np.array(self.last_reading.q if self.last_reading else np.zeros(7))
-        cyc, comp, rm, rr, cmds = Growable(), Growable(), Growable(), Growable(), Growable(7)
+        n = self.controller.model.nv
+        q_start = np.array(self.last_reading.q if self.last_reading else np.zeros(n))
+        cyc, comp, rm, rr, cmds = Growable(), Growable(), Growable(), Growable(), Growable(n)
         robot_t = 0.0
         stop_deadline: float | None = None
         wall0 = time.perf_counter()

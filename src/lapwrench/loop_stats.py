@@ -30,8 +30,8 @@ class LoopStats:
     compute_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
     rcm_error_measured: np.ndarray = field(default_factory=lambda: np.zeros(0))
     rcm_error_reference: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    commands: np.ndarray = field(default_factory=lambda: np.zeros((0, 7)))
-    q_start: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    commands: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # cycles x joints
+    q_start: np.ndarray = field(default_factory=lambda: np.zeros(0))  # one value per joint
     p_R: np.ndarray = field(default_factory=lambda: np.zeros(3))
     robot_time: float = 0.0
     wall_time: float = 0.0

@@ -257,7 +257,7 @@ class InputValidator:
         n = self._q_lo.shape[0]
         q, dq = _vector(r.q, n), _vector(r.dq, n)
         if q is None or dq is None:
-            events.append(InputEvent(t, "robot", "robot state must hold 7 joint positions and velocities"))
+            events.append(InputEvent(t, "robot", f"robot state must hold {n} joint positions and velocities"))
             return None
         status = self._joint_status(q, dq, self._q_lo, self._q_hi, self.position_tolerance, self._dq_max)
         if status == NOT_FINITE:

@@ -17,15 +17,15 @@ from lapwrench.config import CameraConfig, Config
 from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
 from lapwrench.rcm.geometry import closest_point
-from lapwrench.robot.description import RobotKind
+from lapwrench.robot.description import ARM_SPECS, RobotKind
 from lapwrench.robot.limits import limit_usage
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading
 from lapwrench.sources import Observable, Source
 from lapwrench.spatial import Mat, Vec
 
-# Scope pointing straight down, arm comfortably inside its limits (Panda and FR3).
-DEFAULT_Q0 = np.array([0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785])
+# Scope pointing straight down, arm comfortably inside its limits: the Panda's (and FR3's) home pose.
+DEFAULT_Q0 = np.array(ARM_SPECS["panda"].home_pose)
 
 
 def project_points(points: Vec, p_C: Vec, R_C: Mat, cam: CameraConfig) -> tuple[Vec, np.ndarray]:

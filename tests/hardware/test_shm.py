@@ -10,6 +10,7 @@ import pytest
 from lapwrench.hardware.log import CycleRecord
 from lapwrench.hardware.rt import MAX_POINTS, CycleCodec, ShmInput, ShmLogSink, bus_layout
 from lapwrench.hardware.shm import Bus, Layout, ShmError, pack_event, unpack_event
+from lapwrench.robot.description import MAX_JOINTS
 
 
 @pytest.fixture
@@ -110,6 +111,23 @@ def test_cycle_records_survive_the_ring(bus: Bus) -> None:
     assert a.instruments.tolist() == [[10.0, 20.0], [30.0, 40.0]]
     assert set(a.wrenches) == {"rcm", "interaction"} and a.wrenches["rcm"].tolist() == list(range(6))
     assert b.mode == "idle" and b.instruments is None and b.ft_force is None and b.rcm_error_measured == 2e-3
+
+
+def test_cycle_rows_record_the_joint_count(bus: Bus) -> None:
+    """Rows have MAX_JOINTS places per joint vector and carry the arm's own count: a 6-joint arm's record
+    comes back with 6 joints, one with more joints than a row holds is dropped and counted."""
+    sink = ShmLogSink(bus.ring("log"), bus.ring("events"))
+    six = {name: np.arange(6.0) + i for i, name in enumerate(("q", "dq", "tau_J", "q_ref", "q_cmd"))}
+    sink.cycle(record(**six))
+    too_many = np.zeros(MAX_JOINTS + 1)
+    sink.cycle(record(q=too_many, dq=too_many, q_ref=too_many, q_cmd=too_many))
+    assert sink.encode_errors == 1
+    decoder = CycleCodec()
+    for row in bus.ring("events").take():
+        decoder.learn(unpack_event(row)[2])
+    (got,) = (decoder.decode(r) for r in bus.ring("log").take())
+    for name, value in six.items():
+        assert getattr(got, name).tolist() == value.tolist(), name
 
 
 def test_a_name_that_cannot_be_announced_is_retried(bus: Bus) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
+from lapwrench.robot.description import ARM_SPECS
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.scene.build import incision_position_for
 from lapwrench.sim.scene.config import SceneConfig
@@ -30,6 +31,19 @@ def test_worlds_sharing_a_scene_keep_their_own_gains(panda_scene) -> None:
     a = SimWorld(panda_scene, gains=soft)
     b = SimWorld(panda_scene)
     assert a.model.actuator_gainprm[0, 0] == 300.0 and b.model.actuator_gainprm[0, 0] == 3000.0
+
+
+def test_the_servo_gains_are_the_robots_and_one_per_joint(panda_scene) -> None:
+    spec = ARM_SPECS["panda"]
+    w = SimWorld(panda_scene)
+    assert w.n_joints == spec.n_joints and w.gains == JointServoGains.for_robot("panda")
+    act = [w.model.actuator(f"servo_{n}").id for n in w.scene.arm_joint_names]
+    assert w.model.actuator_gainprm[act, 0].tolist() == list(spec.servo_stiffness)
+    short = JointServoGains(stiffness=spec.servo_stiffness[:-1], damping=spec.servo_damping[:-1])
+    with pytest.raises(ValueError, match=f"{spec.n_joints} joints"):
+        SimWorld(panda_scene, gains=short)
+    with pytest.raises(ValueError, match="differ in length"):
+        JointServoGains(stiffness=spec.servo_stiffness, damping=spec.servo_damping[:-1])
 
 
 def test_timing(world: SimWorld) -> None:

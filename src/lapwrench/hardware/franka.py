@@ -38,7 +38,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from lapwrench.robot.description import RobotKind, ScopeGeometry
+from lapwrench.robot.description import ARM_SPECS, RobotKind, ScopeGeometry
 from lapwrench.robot.errors import RobotError
 from lapwrench.sensors import RobotReading
 from lapwrench.spatial import Vec
@@ -85,7 +85,8 @@ class CollisionThresholds:
 
     Above a lower threshold the robot flags a contact; above an upper one it stops with a reflex.
     The defaults are high (a hand on the scope and a trocar are expected contacts), like the
-    values libfranka's examples use for interaction tasks.
+    values libfranka's examples use for interaction tasks. The torque thresholds hold one value per
+    joint of the Franka arm (checked against its spec by :class:`FrankaRobot`).
     """
 
     lower_torque: tuple[float, ...] = (20.0, 20.0, 18.0, 18.0, 16.0, 14.0, 12.0)
@@ -94,9 +95,10 @@ class CollisionThresholds:
     upper_force: tuple[float, ...] = (40.0, 40.0, 40.0, 50.0, 50.0, 50.0)
 
     def __post_init__(self) -> None:
-        for name, n in (("lower_torque", 7), ("upper_torque", 7), ("lower_force", 6), ("upper_force", 6)):
+        n_torque = len(self.lower_torque)
+        for name, n in (("lower_torque", n_torque), ("upper_torque", n_torque), ("lower_force", 6), ("upper_force", 6)):
             v = getattr(self, name)
-            if len(v) != n or not all(math.isfinite(x) and x > 0 for x in v):
+            if len(v) != n or not v or not all(math.isfinite(x) and x > 0 for x in v):
                 raise ValueError(f"collision.{name} must be {n} positive numbers, got {v!r}")
         if any(lo > hi for lo, hi in zip(self.lower_torque, self.upper_torque, strict=True)) or any(
             lo > hi for lo, hi in zip(self.lower_force, self.upper_force, strict=True)
@@ -187,13 +189,17 @@ class FrankaRobot:
         self.kind: RobotKind = kind
         self.realtime = realtime
         self.collision = collision if collision is not None else CollisionThresholds()
+        n = ARM_SPECS[kind].n_joints
+        if len(self.collision.lower_torque) != n:
+            raise ValueError(f"collision torque thresholds need {n} values (one per {kind} joint), got "
+                             f"{len(self.collision.lower_torque)}")
         self.ext_wrench_sign: ExtWrenchSign = ext_wrench_sign
         self.report_external_force = report_external_force
         self.load = load
         self.joint_impedance = joint_impedance
         self.dt = dt
         self.state: Any = None
-        self.tau_J = np.zeros(7)
+        self.tau_J = np.zeros(n)
         self.robot_time = 0.0
         self.lost_cycles = 0
         self._robot: Any = None

@@ -40,6 +40,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from lapwrench.robot.description import ARM_SPECS
+
 COMMAND_PORT = 1337
 LOOPBACK = "127.0.0.1"
 READY = "FRANKYSIM-READY"
@@ -303,13 +305,14 @@ def _serve(q0: tuple[float, ...] | None, stats_path: str | None, realtime: bool)
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description="franky-sim server on 127.0.0.1 (lapwrench tests/bench)")
-    p.add_argument("--q0", help="initial joint configuration, 7 comma-separated values (rad)")
+    n = ARM_SPECS["fr3"].n_joints  # franky-sim simulates an FR3
+    p.add_argument("--q0", help=f"initial joint configuration, {n} comma-separated values (rad)")
     p.add_argument("--stats", help="write per-step compute time statistics (JSON) here on exit")
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     a = p.parse_args(argv)
     q0 = None if a.q0 is None else tuple(float(v) for v in a.q0.split(","))
-    if q0 is not None and len(q0) != 7:
-        p.error("--q0 needs 7 values")
+    if q0 is not None and len(q0) != n:
+        p.error(f"--q0 needs {n} values")
     _serve(q0, a.stats, not a.no_realtime)
 
 

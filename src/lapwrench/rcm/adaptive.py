@@ -92,7 +92,7 @@ class AdaptiveState(NamedTuple):
     @staticmethod
     def start(p_R: Vec) -> AdaptiveState:
         p = np.array(p_R, dtype=float)
-        scalars = np.zeros(7)
+        scalars = np.zeros(3 + len(GATE_SIGNALS))  # w, filter started, anchor updates, the gate signals
         scalars[0] = 1.0
         return AdaptiveState(p, p.copy(), np.zeros(3), np.zeros(6), scalars)
 

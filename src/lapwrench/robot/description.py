@@ -39,17 +39,58 @@ class RobotDescriptionError(RuntimeError):
 
 @dataclass(frozen=True)
 class ArmSpec:
-    """Names that differ between the Panda and FR3 descriptions."""
+    """One arm as data: its joint names (their count is the length of every per-joint vector), the
+    links that differ between descriptions, and its start poses (rad, one value per joint).
+
+    ``home_pose`` is the controller's default start (scope pointing straight down, comfortably
+    inside the limits: the virtual closed loop, the real-time warm-up, franky-sim's start);
+    ``sim_start_pose`` the simulated scene's (flange 0.482 m above the base, 0.5 m in front, scope
+    straight down, at least 0.9 rad from every joint limit). ``servo_stiffness`` (N m/rad) and
+    ``servo_damping`` (N m s/rad) are the simulated joint position servo's gains: libfranka's default
+    joint impedance, and about critical damping with the arm's inertia plus armature near the start pose.
+    ``sim_torque_bias`` (N m) is the constant offset the simulation puts on the measured joint torques
+    behind the external force estimate (a Franka-like torque sensing imperfection).
+    """
 
     joint_names: tuple[str, ...]
     flange_link: str
     base_link: str
+    home_pose: tuple[float, ...]
+    sim_start_pose: tuple[float, ...]
+    servo_stiffness: tuple[float, ...]
+    servo_damping: tuple[float, ...]
+    sim_torque_bias: tuple[float, ...]
 
+    def __post_init__(self) -> None:
+        for name in ("home_pose", "sim_start_pose", "servo_stiffness", "servo_damping", "sim_torque_bias"):
+            if len(getattr(self, name)) != len(self.joint_names):
+                raise ValueError(f"{name} needs one value per joint ({len(self.joint_names)})")
+
+    @property
+    def n_joints(self) -> int:
+        """The arm's joint count (the length of every per-joint vector: q, dq, limits, commands)."""
+        return len(self.joint_names)
+
+
+# The Panda and FR3 share their kinematics, hence their start poses and simulated servo and torque sensing.
+_FRANKA_HOME = (0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785)
+_FRANKA_SIM_START = (0.0, -0.1774, 0.0, -2.1379, 0.0, 1.9606, math.pi / 4)
+_FRANKA_SIM = {
+    "servo_stiffness": (3000.0, 3000.0, 3000.0, 2500.0, 2500.0, 2000.0, 2000.0),
+    "servo_damping": (150.0, 150.0, 110.0, 100.0, 40.0, 40.0, 30.0),
+    "sim_torque_bias": (0.08, -0.1, 0.05, 0.1, -0.02, 0.03, 0.01),
+}
 
 ARM_SPECS: dict[str, ArmSpec] = {
-    "panda": ArmSpec(tuple(f"panda_joint{i}" for i in range(1, 8)), "panda_link8", "panda_link0"),
-    "fr3": ArmSpec(tuple(f"joint{i}" for i in range(1, 8)), "link8", "link0"),
+    "panda": ArmSpec(tuple(f"panda_joint{i}" for i in range(1, 8)), "panda_link8", "panda_link0", _FRANKA_HOME,
+                     _FRANKA_SIM_START, **_FRANKA_SIM),
+    "fr3": ArmSpec(tuple(f"joint{i}" for i in range(1, 8)), "link8", "link0", _FRANKA_HOME, _FRANKA_SIM_START,
+                   **_FRANKA_SIM),
 }
+
+MAX_JOINTS = max(spec.n_joints for spec in ARM_SPECS.values())
+"""The most joints any shipped arm has: the per-joint width of fixed-size formats (the real-time bus's
+cycle rows), which also record the actual count."""
 
 
 @dataclass(frozen=True)
@@ -195,7 +236,7 @@ def _add_link(
 
 
 def build_urdf(kind: RobotKind = "panda", scope: ScopeGeometry | None = None) -> str:
-    """URDF text of the 7-DoF arm without gripper, with the laparoscope on its flange."""
+    """URDF text of the arm of ``kind`` without gripper, with the laparoscope on its flange."""
     scope = scope or ScopeGeometry()
     path = arm_urdf_path(kind)
     try:

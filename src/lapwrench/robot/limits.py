@@ -34,7 +34,7 @@ _TABLE: dict[str, dict[str, list[float]]] = {
 
 @dataclass(frozen=True)
 class JointLimits:
-    """Per-joint limits of one robot model (arrays of length 7)."""
+    """Per-joint limits of one robot model (arrays of the arm's joint count)."""
 
     position_lower: Vec
     position_upper: Vec
@@ -76,8 +76,15 @@ def franka_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
     )
 
 
+def joint_torque_limits(kind: str) -> Vec:
+    """The joint torque limits (N m) of ``kind``, one per joint (the simulator's servo clip)."""
+    if kind not in _TABLE:
+        raise ValueError(f"no limit table for robot {kind!r}; choose one of {sorted(_TABLE)}")
+    return np.array(_TABLE[kind]["torque"], dtype=float)
+
+
 def limit_usage(q_ref: np.ndarray, dt: float, limits: JointLimits, q_start: Vec | None = None) -> dict[str, float]:
-    """Largest fraction of each limit used by a reference sequence (T x 7), as libfranka sees it.
+    """Largest fraction of each limit used by a reference sequence (T x joints), as libfranka sees it.
 
     Velocity, acceleration and jerk are the backward differences of the commanded positions,
     starting from rest at ``q_start`` (default: the first reference). A value <= 1 means inside.

@@ -14,6 +14,7 @@ import pinocchio as pin
 
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.description import (
+    ARM_SPECS,
     FRAME_C,
     FRAME_E,
     FRAME_H,
@@ -157,7 +158,8 @@ def _vector_arg(x: object, n: int, what: str) -> Vec:
 
 
 class RobotModel:
-    """The 7-DoF arm (fingers removed) with a laparoscope on the flange, in Pinocchio."""
+    """The arm of ``kind`` (fingers removed, ``nq = nv`` = its spec's joint count) with a laparoscope on
+    the flange, in Pinocchio."""
 
     def __init__(self, kind: RobotKind = "panda", scope: ScopeGeometry | None = None) -> None:
         self.kind: RobotKind = kind
@@ -165,9 +167,11 @@ class RobotModel:
         self.urdf = build_urdf(kind, self.scope)
         self.model = pin.buildModelFromXML(self.urdf)
         self.data = self.model.createData()
-        if self.model.nq != 7 or self.model.nv != 7:
-            raise ValueError(f"expected a 7-DoF arm, the {kind} description has nq={self.model.nq}")
-        self.nv = self.model.nv
+        n = ARM_SPECS[kind].n_joints
+        if self.model.nq != n or self.model.nv != n:
+            raise ValueError(f"expected a {n}-DoF arm, the {kind} description has nq={self.model.nq}")
+        self.nq: int = self.model.nq
+        self.nv: int = self.model.nv
         self.frame_E = self.model.getFrameId(FRAME_E)
         self.frame_H = self.model.getFrameId(FRAME_H)
         self.frame_C = self.model.getFrameId(FRAME_C)

@@ -41,7 +41,7 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     """
     q = np.asarray(q_measured, dtype=float)
     p = np.asarray(p_R, dtype=float)
-    if q.shape != (7,) or p.shape != (3,):
+    if q.shape != (model.nq,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
     axis = model.scope_axis_at(q)
     e, depth = axis_rcm_error_and_depth(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))

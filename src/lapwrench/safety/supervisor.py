@@ -7,7 +7,7 @@ and jerk from the history of the commands *it actually sent*, exactly as libfran
 (backward differences at the control period: ``v = Δq/dt``, ``a = Δv/dt``, ``j = Δa/dt``, from
 rest at the start pose), and checks them against the Franka limits. Then:
 
-* **Command validation.** A command that is not 7 finite numbers, leaves the joint position
+* **Command validation.** A command that is not one finite number per joint, leaves the joint position
   limits, or breaks a velocity/acceleration/jerk limit is *replaced* by the next sample of a
   jerk-limited stop, an event is logged and the supervisor latches into a stop with an alarm.
   A controller that produced one bad command is not trusted for the next.
@@ -80,12 +80,13 @@ class SafetySupervisor(SupervisorWatches):
         self._stop_a = stop.acceleration
         self._stop_j = stop.jerk
         self.replaced_commands = 0
-        self._q = np.zeros(7)
-        self._v = np.zeros(7)
-        self._a = np.zeros(7)
+        self.n_joints = int(limits.position_lower.shape[0])
+        self._q = np.zeros(self.n_joints)
+        self._v = np.zeros(self.n_joints)
+        self._a = np.zeros(self.n_joints)
         self._started = False
         # load the compiled checks now, not in the first cycle
-        z = np.zeros(7)
+        z = np.zeros(self.n_joints)
         command_violation(z, z, z, z, self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
         nearest_limit(z, self._lo, self._hi)
 
@@ -93,9 +94,10 @@ class SafetySupervisor(SupervisorWatches):
     def start(self, q0: Vec, time: float = 0.0) -> None:
         """Start supervising from rest at ``q0`` (the robot's measured joints)."""
         q0 = np.asarray(q0, dtype=float)
-        if q0.shape != (7,) or not np.all(np.isfinite(q0)):
-            raise ValueError("supervisor start pose must be 7 finite joint positions")
-        self._q, self._v, self._a = q0.copy(), np.zeros(7), np.zeros(7)
+        n = self.n_joints
+        if q0.shape != (n,) or not np.all(np.isfinite(q0)):
+            raise ValueError(f"supervisor start pose must be {n} finite joint positions")
+        self._q, self._v, self._a = q0.copy(), np.zeros(n), np.zeros(n)
         self.state = SupervisorState.RUNNING
         self.alarm, self.alarm_reason = False, None
         self.consecutive_misses = 0
@@ -121,8 +123,8 @@ class SafetySupervisor(SupervisorWatches):
             q = np.asarray(q_cmd, dtype=float)
         except (TypeError, ValueError):
             return "command_invalid", "command is not numeric"
-        if q.shape != (7,):
-            return "command_invalid", f"command has shape {q.shape}, expected (7,)"
+        if q.shape != self._q.shape:
+            return "command_invalid", f"command has shape {q.shape}, expected {self._q.shape}"
         q = np.ascontiguousarray(q)
         if not math.isfinite(q.sum()):
             return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"

@@ -110,7 +110,7 @@ class SupervisorWatches:
     def _watch_joints(self, time: float, q_measured: Vec) -> None:
         c = self.cfg
         qm = np.ascontiguousarray(q_measured, dtype=np.float64)
-        if qm.shape != (7,) or not math.isfinite(qm.sum()):
+        if qm.shape != self._lo.shape or not math.isfinite(qm.sum()):
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return
         j, room = nearest_limit(qm, self._lo, self._hi)

@@ -18,6 +18,7 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
+from lapwrench.robot.description import ARM_SPECS
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
@@ -38,9 +39,10 @@ from lapwrench.sources import Observable, Source
 DETECTION_LATENCY = 0.04
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
 
-# Franka-like joint torque sensing imperfections behind the external force estimate.
+# Franka-like joint torque sensing imperfections behind the external force estimate: white noise, and
+# a constant bias per joint from the robot's spec (TORQUE_BIAS: the Panda's).
 TORQUE_NOISE = 0.05  # N m, white
-TORQUE_BIAS = (0.08, -0.1, 0.05, 0.1, -0.02, 0.03, 0.01)  # N m
+TORQUE_BIAS = ARM_SPECS["panda"].sim_torque_bias  # N m
 
 
 class SafetyStopError(RuntimeError):
@@ -148,8 +150,9 @@ class ClosedLoop:
         s_ft, s_tac, s_obs = (int(x.generate_state(1)[0]) for x in rng.spawn(3))
         self.ft = SimForceTorqueSensor(self.world, seed=s_ft)
         self.tactile = TactileGripModel(seed=s_tac)
+        bias = ARM_SPECS[sc.kind].sim_torque_bias
         self.robot = SimRobot(
-            self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=s_obs)
+            self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=bias, seed=s_obs)
         )
         # the same measured-state bounds as on the robot; compute time measured, no wall-clock deadline
         self.supervisor = SafetySupervisor(

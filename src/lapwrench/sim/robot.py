@@ -47,7 +47,7 @@ class ForceEstimateConfig:
 
     Attributes:
         torque_noise: Standard deviation (N m) of white noise on each measured joint torque.
-        torque_bias: Constant offset (N m) on the measured joint torques (7 values or one).
+        torque_bias: Constant offset (N m) on the measured joint torques (one per joint, or one for all).
         observer_gain: Bandwidth (1/s) of the momentum observer (the Franka's estimate is filtered too).
         damping: Damping of the least-squares wrench solve (near singularities).
         seed: Noise generator seed.
@@ -104,9 +104,9 @@ class SimRobot:
         self.model = RobotModel(cfg.kind, cfg.scope)
         self._rng = np.random.default_rng(self.est.seed)
         bias = np.asarray(self.est.torque_bias, dtype=float)
-        self._bias = np.broadcast_to(bias, (7,)).copy()
+        self._bias = np.broadcast_to(bias, (self.model.nv,)).copy()
         self.observer = ExternalForceObserver(self.model, self.est.observer_gain, self.est.damping)
-        self.tau_J = np.zeros(7)
+        self.tau_J = np.zeros(self.model.nv)
         self.robot_time = 0.0
         self._connected = False
         self._next_wall = 0.0
@@ -122,7 +122,7 @@ class SimRobot:
         tau = w.joint_torque_tick_mean() if self.est.sampling == "tick_mean" else w.joint_torque_measured()
         tau_J = tau + self._bias
         if self.est.torque_noise > 0:
-            tau_J = tau_J + self._rng.normal(0.0, self.est.torque_noise, 7)
+            tau_J = tau_J + self._rng.normal(0.0, self.est.torque_noise, tau_J.shape[0])
         self.tau_J = tau_J
         force = self.observer.update(q, dq, tau_J, self.dt)
         return RobotReading(q, dq, force, self.robot_time)

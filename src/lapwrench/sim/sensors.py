@@ -279,19 +279,20 @@ class ExternalForceObserver:
         self.model = model
         self.gain = gain
         self.damping = damping
-        self.r = np.zeros(7)
-        self._integral = np.zeros(7)
+        n = model.nv
+        self.r = np.zeros(n)
+        self._integral = np.zeros(n)
         self._p0: np.ndarray | None = None
         self._data = model.model.createData()
-        self._lower = np.tril_indices(7, -1)
+        self._lower = np.tril_indices(n, -1)
         self._step = None  # the kernel bound to its argument types at the first update
         # Compile the tick (or load it from numba's cache) now, not in the first reading.
-        self.update(pin.neutral(model.model), np.zeros(7), np.zeros(7), 1e-3)
+        self.update(pin.neutral(model.model), np.zeros(n), np.zeros(n), 1e-3)
         self.reset()
 
     def reset(self) -> None:
-        self.r = np.zeros(7)
-        self._integral = np.zeros(7)
+        self.r = np.zeros(self.model.nv)
+        self._integral = np.zeros(self.model.nv)
         self._p0 = None
 
     def update(self, q: np.ndarray, dq: np.ndarray, tau_J: np.ndarray, dt: float) -> np.ndarray:

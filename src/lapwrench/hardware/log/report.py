@@ -29,7 +29,8 @@ def _arr(cycles: list[dict[str, Any]], key: str, n: int) -> np.ndarray:
     for i, c in enumerate(cycles):
         v = c.get(key)
         if v is not None:
-            out[i] = np.array([np.nan if x is None else x for x in v], dtype=float)
+            row = np.array([np.nan if x is None else x for x in v], dtype=float)[:n]
+            out[i, : row.size] = row
     return out
 
 
@@ -89,11 +90,18 @@ def _plot_modes(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path
     return _save(fig, out / "mode.png")
 
 
+def _joint_count(cycles: list[dict[str, Any]]) -> int:
+    """The arm's joint count as the log records it: the length of its joint vectors (at least 1)."""
+    return max((len(c.get(key) or ()) for c in cycles for key in ("q", "q_cmd")), default=0) or 1
+
+
 def _plot_joints(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path:
-    q_cmd = _arr(cycles, "q_cmd", 7)
-    q = _arr(cycles, "q", 7)
-    fig, axes = plt.subplots(7, 1, figsize=(9, 11), sharex=True)
-    for j in range(7):
+    n = _joint_count(cycles)
+    q_cmd = _arr(cycles, "q_cmd", n)
+    q = _arr(cycles, "q", n)
+    fig, grid = plt.subplots(n, 1, figsize=(9, 11), sharex=True, squeeze=False)
+    axes = grid[:, 0]
+    for j in range(n):
         axes[j].plot(t, q_cmd[:, j], label="command")
         axes[j].plot(t, q[:, j], "--", label="measured")
         axes[j].set_ylabel(f"q{j + 1} (rad)")

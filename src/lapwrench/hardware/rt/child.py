@@ -118,10 +118,10 @@ def _open_ft(spec: FtSpec) -> Any:
 def _warm_up(ctrl: Any, spec: RtSpec) -> None:
     """Run the loop's own per-cycle code once outside the loop (first calls compile or allocate:
     measured 22 ms for the first ``measure_scope``), on throwaway state."""
+    from lapwrench.robot.description import ARM_SPECS
     from lapwrench.safety.supervisor import SafetySupervisor, measure_scope
-    from lapwrench.virtual import DEFAULT_Q0
 
-    q = np.array(DEFAULT_Q0, dtype=float)
+    q = np.array(ARM_SPECS[ctrl.model.kind].home_pose, dtype=float)
     scope = measure_scope(ctrl.model, q, np.zeros(3))
     sup = SafetySupervisor(ctrl.model.limits, spec.cfg.robot.dt, spec.supervisor)
     sup.start(q)

@@ -12,6 +12,10 @@ import numpy as np
 from lapwrench.hardware.log import CycleRecord
 from lapwrench.hardware.rt.sizes import MAX_POINTS, TACTILE_N
 from lapwrench.hardware.shm import Ring, pack_event
+from lapwrench.robot.description import MAX_JOINTS
+
+_WRENCH_SLOT = 1 + 6
+"""Places per wrench in a row: the interned name, then the 6-vector [moment; force]."""
 
 
 class CycleCodec:
@@ -20,16 +24,21 @@ class CycleCodec:
     Optional vectors carry a presence flag (``None`` stays ``None``; NaN stays NaN). Strings (mode,
     supervisor state, wrench names) are interned: a new string is announced once on the event ring
     (kind ``__intern__``) before the first row that uses it.
+
+    The row has a fixed width (a ring slot), so each joint vector (q, dq, tau_J, q_ref, q_cmd) has
+    :data:`~lapwrench.robot.description.MAX_JOINTS` places; the row records the arm's actual joint
+    count (``n_joints``, from the record's q) and only that many values are written and read back.
     """
 
     N_WRENCH = 8
     _spec: tuple[tuple[str, str, int], ...] = (
-        ("t", "f", 1), ("robot_time", "f", 1), ("k", "f", 1), ("q", "v", 7), ("dq", "v", 7),
-        ("tau_J", "o", 7), ("external_force", "o", 3), ("ft_force", "o", 3), ("ft_torque", "o", 3),
-        ("tactile", "o", TACTILE_N), ("instruments", "p", MAX_POINTS), ("wrenches", "w", N_WRENCH),
-        ("mode", "s", 1), ("delta", "f", 1), ("contacts", "f", 1), ("p_R", "v", 3), ("e_R", "v", 3),
-        ("rcm_error", "f", 1), ("rcm_error_measured", "n", 1), ("q_ref", "v", 7), ("q_cmd", "v", 7),
-        ("supervisor", "s", 1), ("alarm", "f", 1), ("compute_us", "f", 1), ("cycle_us", "f", 1),
+        ("t", "f", 1), ("robot_time", "f", 1), ("k", "f", 1), ("n_joints", "f", 1), ("q", "v", MAX_JOINTS),
+        ("dq", "v", MAX_JOINTS), ("tau_J", "o", MAX_JOINTS), ("external_force", "o", 3), ("ft_force", "o", 3),
+        ("ft_torque", "o", 3), ("tactile", "o", TACTILE_N), ("instruments", "p", MAX_POINTS),
+        ("wrenches", "w", N_WRENCH), ("mode", "s", 1), ("delta", "f", 1), ("contacts", "f", 1), ("p_R", "v", 3),
+        ("e_R", "v", 3), ("rcm_error", "f", 1), ("rcm_error_measured", "n", 1), ("q_ref", "v", MAX_JOINTS),
+        ("q_cmd", "v", MAX_JOINTS), ("supervisor", "s", 1), ("alarm", "f", 1), ("compute_us", "f", 1),
+        ("cycle_us", "f", 1),
     )
     OFF: ClassVar[dict[str, int]] = {}
     WIDTH = 0
@@ -39,7 +48,7 @@ class CycleCodec:
         o = 0
         for name, kind, n in cls._spec:
             cls.OFF[name] = o
-            o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": 7 * n, "s": 1, "n": 2}[kind]
+            o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": _WRENCH_SLOT * n, "s": 1, "n": 2}[kind]
         cls.WIDTH = o
 
     def __init__(self, announce: Callable[[str, str], bool] | None = None) -> None:
@@ -66,12 +75,17 @@ class CycleCodec:
 
     def encode(self, row: np.ndarray, r: CycleRecord) -> None:
         off = self.OFF
+        nj = len(r.q)
+        if nj > MAX_JOINTS:
+            raise ValueError(f"a cycle row holds at most {MAX_JOINTS} joints, the record has {nj}")
         row[0] = r.t
         row[1] = r.robot_time
         row[2] = r.k
-        row[off["q"] : off["q"] + 7] = r.q
-        row[off["dq"] : off["dq"] + 7] = r.dq
-        for name, n in (("tau_J", 7), ("external_force", 3), ("ft_force", 3), ("ft_torque", 3), ("tactile", TACTILE_N)):
+        row[off["n_joints"]] = nj
+        row[off["q"] : off["q"] + nj] = r.q
+        row[off["dq"] : off["dq"] + nj] = r.dq
+        optional = (("tau_J", nj), ("external_force", 3), ("ft_force", 3), ("ft_torque", 3), ("tactile", TACTILE_N))
+        for name, n in optional:
             o = off[name]
             v = getattr(r, name)
             if v is None:
@@ -87,10 +101,11 @@ class CycleCodec:
             row[o] = len(pts)
             row[o + 1 : o + 1 + 2 * len(pts)] = pts.ravel()
         o = off["wrenches"]
-        row[o : o + 7 * self.N_WRENCH : 7] = -2.0
+        row[o : o + _WRENCH_SLOT * self.N_WRENCH : _WRENCH_SLOT] = -2.0
         for i, (name, w) in enumerate(list(r.wrenches.items())[: self.N_WRENCH]):
-            row[o + 7 * i] = self.intern("wrench", name)
-            row[o + 7 * i + 1 : o + 7 * i + 7] = w
+            s = o + _WRENCH_SLOT * i
+            row[s] = self.intern("wrench", name)
+            row[s + 1 : s + _WRENCH_SLOT] = w
         row[off["mode"]] = self.intern("mode", r.mode)
         row[off["delta"]] = r.delta
         row[off["contacts"]] = r.contacts
@@ -100,8 +115,8 @@ class CycleCodec:
         o = off["rcm_error_measured"]
         row[o] = 0.0 if r.rcm_error_measured is None else 1.0
         row[o + 1] = math.nan if r.rcm_error_measured is None else r.rcm_error_measured
-        row[off["q_ref"] : off["q_ref"] + 7] = r.q_ref
-        row[off["q_cmd"] : off["q_cmd"] + 7] = r.q_cmd
+        row[off["q_ref"] : off["q_ref"] + nj] = r.q_ref
+        row[off["q_cmd"] : off["q_cmd"] + nj] = r.q_cmd
         row[off["supervisor"]] = self.intern("supervisor", r.supervisor)
         row[off["alarm"]] = 1.0 if r.alarm else 0.0
         row[off["compute_us"]] = r.compute_us
@@ -114,6 +129,7 @@ class CycleCodec:
 
     def decode(self, row: np.ndarray) -> CycleRecord:
         off = self.OFF
+        nj = int(row[off["n_joints"]])
 
         def opt(name: str, n: int) -> np.ndarray | None:
             o = off[name]
@@ -123,19 +139,16 @@ class CycleCodec:
         n = int(row[o])
         inst = None if n < 0 else row[o + 1 : o + 1 + 2 * n].reshape(n, 2).copy()
         o = off["wrenches"]
-        wr = {
-            self._name("wrench", row[o + 7 * i]): row[o + 7 * i + 1 : o + 7 * i + 7].copy()
-            for i in range(self.N_WRENCH)
-            if row[o + 7 * i] >= -1
-        }
+        slots = (o + _WRENCH_SLOT * i for i in range(self.N_WRENCH))
+        wr = {self._name("wrench", row[s]): row[s + 1 : s + _WRENCH_SLOT].copy() for s in slots if row[s] >= -1}
         om = off["rcm_error_measured"]
         return CycleRecord(
             t=float(row[0]),
             robot_time=float(row[1]),
             k=int(row[2]),
-            q=row[off["q"] : off["q"] + 7].copy(),
-            dq=row[off["dq"] : off["dq"] + 7].copy(),
-            tau_J=opt("tau_J", 7),
+            q=row[off["q"] : off["q"] + nj].copy(),
+            dq=row[off["dq"] : off["dq"] + nj].copy(),
+            tau_J=opt("tau_J", nj),
             external_force=opt("external_force", 3),
             ft_force=opt("ft_force", 3),
             ft_torque=opt("ft_torque", 3),
@@ -149,8 +162,8 @@ class CycleCodec:
             e_R=row[off["e_R"] : off["e_R"] + 3].copy(),
             rcm_error=float(row[off["rcm_error"]]),
             rcm_error_measured=float(row[om + 1]) if row[om] == 1.0 else None,
-            q_ref=row[off["q_ref"] : off["q_ref"] + 7].copy(),
-            q_cmd=row[off["q_cmd"] : off["q_cmd"] + 7].copy(),
+            q_ref=row[off["q_ref"] : off["q_ref"] + nj].copy(),
+            q_cmd=row[off["q_cmd"] : off["q_cmd"] + nj].copy(),
             supervisor=self._name("supervisor", row[off["supervisor"]]),
             alarm=bool(row[off["alarm"]]),
             compute_us=float(row[off["compute_us"]]),

@@ -12,7 +12,6 @@ without geometry, the Franka-like joint position servos and the flange pose at q
 
 from __future__ import annotations
 
-import math
 import re
 from functools import cache
 
@@ -20,23 +19,21 @@ import mujoco
 import numpy as np
 
 from lapwrench.robot.description import ARM_SPECS, FRAME_E, RobotKind, ScopeGeometry, build_urdf
+from lapwrench.robot.limits import joint_torque_limits
 
-#: Franka joint torque limits (N m), joints 1-7.
-TAU_MAX = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
-
-#: Default initial arm configuration: flange 0.482 m above the base, 0.5 m in front, scope
-#: pointing straight down (z_E = -z_B). Identical for Panda and FR3 (same kinematics); at least
-#: 0.9 rad from every joint limit.
-_DEFAULT_Q0 = (0.0, -0.1774, 0.0, -2.1379, 0.0, 1.9606, math.pi / 4)
+#: The Panda's joint torque limits (N m), one per joint (each scene clips to its own robot's,
+#: :func:`~lapwrench.robot.limits.joint_torque_limits`).
+TAU_MAX = joint_torque_limits("panda")
 
 _ARM_RGBA = {"panda": (0.92, 0.92, 0.94, 1.0), "fr3": (0.93, 0.93, 0.93, 1.0)}
 
 
 def default_initial_configuration(kind: RobotKind = "panda") -> np.ndarray:
-    """Initial joint configuration q0 (rad): scope pointing down into the abdomen."""
+    """Initial joint configuration q0 (rad): scope pointing down into the abdomen (the robot spec's
+    ``sim_start_pose``: flange 0.482 m above the base, 0.5 m in front, z_E = -z_B)."""
     if kind not in ARM_SPECS:
         raise ValueError(f"unknown robot {kind!r}; choose one of {tuple(ARM_SPECS)}")
-    return np.array(_DEFAULT_Q0, dtype=float)
+    return np.array(ARM_SPECS[kind].sim_start_pose, dtype=float)
 
 
 def _mujoco_urdf_text(kind: RobotKind, scope: ScopeGeometry) -> str:
@@ -129,10 +126,10 @@ def add_link_capsules(spec: mujoco.MjSpec, kind: RobotKind) -> None:
 
 
 def add_joint_servos(spec: mujoco.MjSpec, kind: RobotKind) -> None:
-    """One joint position servo per arm joint, its joint torque clipped to :data:`TAU_MAX`."""
+    """One joint position servo per arm joint, its joint torque clipped to the robot's torque limit."""
     # Franka-like joint position servo: tau = kp (q_ref - q) + kv (dq_ref - dq), plus gravity
     # compensation (jnt actgravcomp); the SimWorld sets kp/kv. The sum is clipped to tau_max.
-    for name, tau in zip(ARM_SPECS[kind].joint_names, TAU_MAX, strict=True):
+    for name, tau in zip(ARM_SPECS[kind].joint_names, joint_torque_limits(kind), strict=True):
         j = spec.joint(name)
         j.actfrclimited = True
         j.actfrcrange = [-tau, tau]

@@ -35,12 +35,12 @@ class Scene:
 
     @property
     def arm_qpos_adr(self) -> np.ndarray:
-        """qpos addresses of the 7 arm joints."""
+        """qpos addresses of the arm joints."""
         return np.array([self.model.joint(n).qposadr[0] for n in self.arm_joint_names])
 
     @property
     def arm_dof_adr(self) -> np.ndarray:
-        """qvel/dof addresses of the 7 arm joints."""
+        """qvel/dof addresses of the arm joints."""
         return np.array([self.model.joint(n).dofadr[0] for n in self.arm_joint_names])
 
 

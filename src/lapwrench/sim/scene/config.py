@@ -98,8 +98,9 @@ class SceneConfig:
             raise ValueError(f"armature must be >= 0, got {self.armature!r}")
         if not (0.0 < self.rcm_lambda0 < 1.0):
             raise ValueError(f"rcm_lambda0 must lie in (0, 1), got {self.rcm_lambda0!r}")
-        if self.q0 is not None and len(self.q0) != 7:
-            raise ValueError(f"q0 needs 7 joint values, got {len(self.q0)}")
+        n = ARM_SPECS[self.kind].n_joints
+        if self.q0 is not None and len(self.q0) != n:
+            raise ValueError(f"q0 needs {n} joint values, got {len(self.q0)}")
 
     @classmethod
     def from_config(cls, cfg: Config) -> SceneConfig:

@@ -15,7 +15,7 @@ import numpy as np
 
 from lapwrench.jit import bind
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
-from lapwrench.sim.scene.arm import TAU_MAX
+from lapwrench.robot.limits import joint_torque_limits
 from lapwrench.sim.scene.build import Scene, build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.scene.names import (
@@ -75,11 +75,15 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         # Own copy: the servo gains are written into the model, and scenes may be shared.
         self.model: mujoco.MjModel = copy.copy(scene.model)
         self.data = mujoco.MjData(self.model)
-        self.gains = gains or JointServoGains()
+        self.gains = gains or JointServoGains.for_robot(scene.config.kind)
         self.max_contact_force = float(max_contact_force)
         m, d = self.model, self.data
         self.n_substeps = round(CONTROL_DT / m.opt.timestep)
         self._qadr = scene.arm_qpos_adr
+        self.n_joints = int(self._qadr.shape[0])
+        if len(self.gains.stiffness) != self.n_joints:
+            raise ValueError(f"gains: {len(self.gains.stiffness)} values, the {scene.config.kind} arm has "
+                             f"{self.n_joints} joints")
         self._vadr = scene.arm_dof_adr
         self._kp = np.asarray(self.gains.stiffness, float)
         self._kv = np.asarray(self.gains.damping, float)
@@ -89,7 +93,7 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         m.actuator_biasprm[self._act, 2] = -self._kv
         self._armature = m.dof_armature[self._vadr].copy()
         self._dof_damping = m.dof_damping[self._vadr].copy()
-        self._tau_max = TAU_MAX.copy()
+        self._tau_max = joint_torque_limits(scene.config.kind)
         self._tau_free = self._tau_max - 1e-9  # |servo torque| below this: not clipped
         self._vsl = _slice_if_contiguous(self._vadr)  # views when possible
         self._qsl = _slice_if_contiguous(self._qadr)
@@ -139,29 +143,29 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         self._warn_number = d.warning.number
         # Arguments of the tick kernels: per-joint constants (rows _C_*), the tick's work rows (_W_*),
         # index tables.
-        self._const = np.zeros((5, 7))
+        self._const = np.zeros((5, self.n_joints))
         self._const[_C_KV_OVER_KP] = self._kv / self._kp
         self._const[_C_KV] = self._kv
         self._const[_C_TAU_FREE] = self._tau_free
         self._const[_C_DAMPING] = self._dof_damping
         self._const[_C_ARMATURE] = self._armature
-        self._work = np.zeros((5, 7))
+        self._work = np.zeros((5, self.n_joints))
         self._q_ref_prev = self._work[_W_Q_REF_PREV]  # views into the work table
         self._tau_J_mean = self._work[_W_TAU_MEAN]
         self._idx = np.array([self._act, self._vadr], dtype=np.int64)
-        self._no_dq_ref = np.zeros(7)
+        self._no_dq_ref = np.zeros(self.n_joints)
         self._tick = self.n_substeps * m.opt.timestep
         self._ids = np.array([self._body_E, self._body_incision, self._weld], dtype=np.int64)
         self._depth_range = np.array([self._depth_min, self._depth_max])
         # The state at the last mj_forward (see the module docstring): its position/velocity stages
         # serve the next tick's first substep while this state is unchanged.
         self._mocap_matters = not _mocap_is_inert(m)
-        self._fwd = np.zeros(m.nq + m.nv + 7 * m.nmocap + m.neq)
+        self._fwd = np.zeros(m.nq + m.nv + (3 + 4) * m.nmocap + m.neq)  # mocap: position, quaternion
         self._fwd_valid = False
         # The kernels bound to these argument types (compiled or loaded from numba's cache now):
         # called without numba's per-call dispatch, so every call passes exactly these types.
         self._begin_tick = bind(
-            _begin_tick, np.zeros(7), self._no_dq_ref, False, False, self._const, self._work, self._idx,
+            _begin_tick, np.zeros(self.n_joints), self._no_dq_ref, False, False, self._const, self._work, self._idx,
             self._ctrl, self._qpos, self._qvel, self._mocap_pos_flat, self._mocap_quat_flat, False,
             self._eq_active, self._fwd,
         )  # fmt: skip
@@ -202,8 +206,8 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         self._fwd_valid = False
         mujoco.mj_resetData(m, d)
         q0 = self.scene.q0 if q is None else np.asarray(q, float)
-        if q0.shape != (7,) or not np.all(np.isfinite(q0)):
-            raise ValueError(f"q must be 7 finite joint values, got {q0!r}")
+        if q0.shape != (self.n_joints,) or not np.all(np.isfinite(q0)):
+            raise ValueError(f"q must be {self.n_joints} finite joint values, got {q0!r}")
         d.qpos[self._qadr] = q0
         d.ctrl[self._act] = q0
         self._q_ref_prev[:] = q0

@@ -6,20 +6,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lapwrench.robot.description import ARM_SPECS
+
 
 @dataclass(frozen=True)
 class JointServoGains:
-    """Joint stiffness (N m/rad) and damping (N m s/rad) of the internal joint position servo.
-
-    Stiffness: libfranka's default joint impedance. Damping: about critical with the arm's inertia
-    plus armature near the default configuration.
+    """Joint stiffness (N m/rad) and damping (N m s/rad) of the internal joint position servo, one
+    value per joint (a robot's defaults: :meth:`for_robot`, from its spec).
     """
 
-    stiffness: tuple[float, ...] = (3000.0, 3000.0, 3000.0, 2500.0, 2500.0, 2000.0, 2000.0)
-    damping: tuple[float, ...] = (150.0, 150.0, 110.0, 100.0, 40.0, 40.0, 30.0)
+    stiffness: tuple[float, ...]
+    damping: tuple[float, ...]
 
     def __post_init__(self) -> None:
         for name in ("stiffness", "damping"):
             v = np.asarray(getattr(self, name), float)
-            if v.shape != (7,) or not np.all(np.isfinite(v)) or np.any(v <= 0):
-                raise ValueError(f"gains.{name} must be 7 positive finite numbers, got {getattr(self, name)!r}")
+            if v.ndim != 1 or v.size == 0 or not np.all(np.isfinite(v)) or np.any(v <= 0):
+                raise ValueError(f"gains.{name} must be positive finite numbers, one per joint, "
+                                 f"got {getattr(self, name)!r}")
+        if len(self.stiffness) != len(self.damping):
+            raise ValueError(f"gains.stiffness and gains.damping differ in length ({len(self.stiffness)} vs "
+                             f"{len(self.damping)})")
+
+    @classmethod
+    def for_robot(cls, kind: str) -> JointServoGains:
+        """The servo gains of robot ``kind``'s spec (:data:`~lapwrench.robot.description.ARM_SPECS`)."""
+        spec = ARM_SPECS[kind]
+        return cls(spec.servo_stiffness, spec.servo_damping)

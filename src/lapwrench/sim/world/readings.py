@@ -28,6 +28,7 @@ class WorldReadings:
     _body_incision: int
     _body_housing: int
     _weld: int
+    n_joints: int
     _qadr: np.ndarray
     _vadr: np.ndarray
     _qsl: slice | np.ndarray

@@ -101,13 +101,13 @@ class WorldStepping(WorldReadings):
         divergence warning, or a shaft-incision contact force above ``max_contact_force``.
         """
         q_ref = np.asarray(q_ref, float)
-        if q_ref.shape != (7,):
+        if q_ref.shape != self._no_dq_ref.shape:  # one value per joint
             raise SimulationUnstableError(self.time, "joint reference q_ref", repr(q_ref))
         if dq_ref is None:
             dq, use_dq = self._no_dq_ref, False
         else:
             dq, use_dq = np.asarray(dq_ref, float), True
-            if dq.shape != (7,):
+            if dq.shape != self._no_dq_ref.shape:
                 if not np.all(np.isfinite(q_ref)):
                     raise SimulationUnstableError(self.time, "joint reference q_ref", repr(q_ref))
                 raise SimulationUnstableError(self.time, "joint velocity reference dq_ref", repr(dq))
