@@ -16,6 +16,8 @@ import pytest
 
 from lapwrench.jit import jit_enabled
 
+pytestmark = pytest.mark.slow  # compiled and uncompiled ticks in subprocesses
+
 SCRIPT = Path(__file__).with_name("compiled_ticks.py")
 
 

@@ -17,6 +17,8 @@ from lapwrench.hardware.detector_process import DetectorProcess
 from lapwrench.hardware.rt import RtProcessError, bus_layout
 from lapwrench.hardware.shm import Bus
 
+pytestmark = pytest.mark.slow  # the detector in its own process
+
 SIZE = (64, 48)
 
 

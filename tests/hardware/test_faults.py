@@ -24,6 +24,8 @@ from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.robot import SimRobot
 
+pytestmark = pytest.mark.slow  # fault injection through the real-time process
+
 
 def push(t: float) -> np.ndarray:
     return np.array([10.0, 0.0, 0.0]) if t >= 0.2 else np.zeros(3)

@@ -35,6 +35,7 @@ import threading
 from typing import Any
 
 import numpy as np
+import pytest
 from hardware.support import MemoryLogger, QdProbe, rt_process, rt_spec
 
 from lapwrench.buffer import LatestValue
@@ -44,6 +45,8 @@ from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import measure_scope
+
+pytestmark = pytest.mark.slow  # franky-sim end to end
 
 
 def hand_force(t: float) -> np.ndarray:

@@ -26,6 +26,8 @@ from lapwrench.hardware.rt import RtOptions, RtProcess, RtProcessError, apply_re
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 
+pytestmark = pytest.mark.slow  # real-time child processes
+
 
 def grip_feed(buffer: LatestValue[Any], stop: threading.Event) -> threading.Thread:
     def run() -> None:

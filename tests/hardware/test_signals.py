@@ -32,6 +32,8 @@ from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SupervisorConfig
 
+pytestmark = pytest.mark.slow  # each case runs `lapwrench run --dry-run` in a subprocess
+
 # the real command line (lapwrench.cli.main), as the console script runs it
 CLI = [sys.executable, "-c", "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))"]
 READY = "lapwrench run: simulated"  # "... ready; devices: ..." (process path) or "... connected; ..." (in-process)

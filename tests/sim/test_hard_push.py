@@ -21,6 +21,8 @@ from lapwrench.sim import hard_push as hp
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions
 from lapwrench.sim.surgeon import SpeedDrivenHand
 
+pytestmark = pytest.mark.slow  # the hard-push runs in the MuJoCo world
+
 TIME_SCALE = 0.3  # 0.45 s push + 0.3 s settling per run
 TABLE_FIGURES = (
     "rcm_error_max_mm",

@@ -14,6 +14,8 @@ from lapwrench.sim import demo as demo_mod
 from lapwrench.sim.scenarios import ScenarioOptions, grip, needle_search, rcm_disturbance, workflow
 from lapwrench.sim.world import SimulationUnstableError
 
+pytestmark = pytest.mark.slow  # full scenarios in the MuJoCo world
+
 PAPER = load()
 TRACKING = load()  # the shipped defaults serve the tracking scenarios too
 
