@@ -80,7 +80,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
     from lapwrench.buffer import LatestValue
     from lapwrench.config import load
     from lapwrench.drivers.tactile import TactileFrame
-    from lapwrench.hardware.cli import FakeFTProcess
+    from lapwrench.hardware.cli import SimulatedHexProcess
     from lapwrench.hardware.frankysim import FrankySimServer
     from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec, franka_factory
     from lapwrench.safety.supervisor import SupervisorConfig
@@ -102,7 +102,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
     try:
         server.start()
         closers.append(server.stop)
-        fake = FakeFTProcess(hand_force, rate_hz=1000.0, fifo_priority=a.ft_box_priority or None).start()
+        fake = SimulatedHexProcess(hand_force, rate_hz=1000.0, fifo_priority=a.ft_box_priority or None).start()
         closers.append(fake.close)
         spec = RtSpec(
             cfg=cfg,

@@ -68,7 +68,7 @@ from lapwrench.hardware.devices import (
     TACTILE_CHECKSUMS,
     CliError,
     DryRunScript,
-    FakeFTProcess,
+    SimulatedHexProcess,
     parse_camera,
     parse_ft_url,
     tactile_format,
@@ -81,7 +81,7 @@ from lapwrench.hardware.run_rt import _run_process
 __all__ = [
     "CliError",
     "DryRunScript",
-    "FakeFTProcess",
+    "SimulatedHexProcess",
     "add_log_report_arguments",
     "add_run_arguments",
     "log_report_main",

@@ -241,7 +241,7 @@ def _force_counts(force_fn: Callable[[float], Any], t0: Any, _i: int) -> np.ndar
     return _hex_counts(force_fn(time.monotonic() - t0.value))
 
 
-def _fake_ft_main(
+def _simulated_hex_main(
     force_fn: Callable[[float], Any], t0: Any, rate_hz: float, conn: Any, fifo_priority: int | None = None
 ) -> None:
     import multiprocessing as mp
@@ -264,7 +264,7 @@ def _fake_ft_main(
         dev.close()
 
 
-class FakeFTProcess:
+class SimulatedHexProcess:
     """A simulated OnRobot HEX box (:class:`~lapwrench.drivers.simulated_hex.SimulatedHexBox`, 10000 counts/N) in
     its own process, streaming ``force_fn(t)`` (N, in {H}) at ``rate_hz`` on 127.0.0.1; ``t`` counts
     from :meth:`set_t0` (before it, ``-inf``). A real box does not share this process's interpreter,
@@ -285,12 +285,12 @@ class FakeFTProcess:
         self.port = 0
         self._conn: Any = None
 
-    def start(self, timeout: float = 30.0) -> FakeFTProcess:
+    def start(self, timeout: float = 30.0) -> SimulatedHexProcess:
         self._conn, child = self.ctx.Pipe()
         self.proc = self.ctx.Process(
-            target=_fake_ft_main,
+            target=_simulated_hex_main,
             args=(self.force_fn, self.t0, self.rate_hz, child, self.fifo_priority),
-            name="lapwrench-fake-ft",
+            name="lapwrench-simulated-hex",
             daemon=True,
         )
         self.proc.start()
@@ -321,10 +321,10 @@ class FakeFTProcess:
 
 def _simulated_devices(
     devices: _Devices, script: DryRunScript, fmt: Any = None
-) -> tuple[str, str, FakeFTProcess]:
+) -> tuple[str, str, SimulatedHexProcess]:
     """The dry run's F/T box (loopback UDP, own process) and tactile array (a pty) writing frames of
     ``fmt`` (default: the driver's default format; pass the reader's format)."""
-    fake = FakeFTProcess(script.force_H).start()
+    fake = SimulatedHexProcess(script.force_H).start()
     devices.add(fake.close)
     master, slave = os.openpty()
     devices.add(lambda: (os.close(master), os.close(slave)))
