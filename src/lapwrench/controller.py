@@ -254,13 +254,12 @@ class Controller:
         controller latches :attr:`stopping`: the cues are switched off and the null-space motion is
         braked with time constant ``motion.stop_time`` while the RCM task keeps acting, down to rest
         (the brake is part of the compiled motion stage).
+        Called only when the desired acceleration breaks a limit (``tick`` handles the admitted case).
         """
         assert self.compiled is not None and self.ref is not None
         s = self.compiled.sat
-        if r.admitted:
-            sat = SaturationResult(s.a_d, (), (), True)  # nothing to saturate: the common case
-        elif r.ref is not None:  # saturated by the compiled step with every row hard: the next common case
-            names = self._box_names + tuple(WALL_NAMES[i] for i in s.wall)
+        names = self._box_names + tuple(WALL_NAMES[i] for i in s.wall)
+        if r.ref is not None:  # saturated by the compiled step with every row hard: the common case
             sat = SaturationResult(r.ref[2], tuple(names[i] for i in np.flatnonzero(r.at_bound)), (), True)
         else:
             n = s.a_d.shape[0]
@@ -269,7 +268,6 @@ class Controller:
             if self.bounds_hook is not None:
                 lo[:n], hi[:n] = self.bounds_hook(self.ref, lo[:n].copy(), hi[:n].copy())
             self._a_lo, self._a_hi = lo[:n], hi[:n]
-            names = self._box_names + tuple(WALL_NAMES[i] for i in s.wall)
             rows = LimitRows(s.C[:m].copy(), lo, hi, s.scale[:m].copy(), names[:m], self._hard[:m])
             sat = saturate(s.a_d.copy(), s.J_task.copy(), s.M.copy(), rows)
         self.infeasible_ticks = 0 if sat.feasible else self.infeasible_ticks + 1

@@ -26,6 +26,7 @@ handled from the start of the command to the last line it prints:
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import os
@@ -33,6 +34,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from types import FrameType
 from typing import Any
 
@@ -148,6 +150,17 @@ class StopSignals:
             raise RunInterrupted(signum)
         self.stop.set(name)
         _write_stderr(f"lapwrench {self.command}: {name}: stopping to rest\n")
+
+
+def run_signalled(body: Callable[[argparse.Namespace, Any, StopSignals], int], args: argparse.Namespace,
+                  cfg: Any) -> int:
+    """Run one path of ``lapwrench run`` (``body(args, cfg, signals)``) with the stop signals handled
+    from start to end (module docstring); a signal before the loop starts ends it with 128 + n."""
+    with StopSignals() as signals:
+        try:
+            return body(args, cfg, signals)
+        except RunInterrupted as exc:
+            return exc.report()
 
 
 def _write_stderr(text: str) -> None:

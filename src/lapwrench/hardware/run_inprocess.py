@@ -10,17 +10,13 @@ import time
 from typing import Any
 
 from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _open_sources
-from lapwrench.hardware.run_common import RunInterrupted, StopSignals, _error_exit, print_summary, stop_reason
+from lapwrench.hardware.run_common import StopSignals, _error_exit, print_summary, run_signalled, stop_reason
 
 
 def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
     """The former single-process loop (``--in-process``): sensor and detector threads share the GIL.
     SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
-    with StopSignals() as signals:
-        try:
-            return _run_in_process_signalled(args, cfg, signals)
-        except RunInterrupted as exc:
-            return exc.report()
+    return run_signalled(_run_in_process_signalled, args, cfg)
 
 
 def _run_in_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSignals) -> int:

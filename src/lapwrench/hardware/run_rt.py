@@ -13,17 +13,13 @@ from collections.abc import Callable
 from typing import Any
 
 from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _simulated_devices, parse_camera, parse_ft_url
-from lapwrench.hardware.run_common import RunInterrupted, StopSignals, _error_exit, print_summary, stop_reason
+from lapwrench.hardware.run_common import StopSignals, _error_exit, print_summary, run_signalled, stop_reason
 
 
 def _run_process(args: argparse.Namespace, cfg: Any) -> int:
     """The loop in its own process, the detector in another; this one feeds, logs and waits.
     SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
-    with StopSignals() as signals:
-        try:
-            return _run_process_signalled(args, cfg, signals)
-        except RunInterrupted as exc:
-            return exc.report()
+    return run_signalled(_run_process_signalled, args, cfg)
 
 
 def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSignals) -> int:
