@@ -32,6 +32,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 import numpy as np
 
+from lapwrench.robot_kinds import ROBOT_KINDS
 from lapwrench.sim.scene.build import build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.world import CONTROL_DT, SimWorld
@@ -174,7 +175,7 @@ class MjStep:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per configuration")
-    ap.add_argument("--kind", choices=("panda", "fr3"), default="panda")
+    ap.add_argument("--kind", choices=ROBOT_KINDS, default="panda")
     ap.add_argument("--chunks", type=int, default=10, help="interleaved chunks per configuration")
     args = ap.parse_args()
 

@@ -8,7 +8,7 @@ saturating ticks, replayed through the compiled step (the exact QP, :func:`~lapw
 and through the old per-joint clamp with the same call signature, interleaved. Everything is
 timed in the same run; the ratios are the machine-independent figures. Last line: one JSON object.
 
-    python bench/tick.py [--ticks N] [--robot panda|fr3]
+    python bench/tick.py [--ticks N] [--robot panda|fr3|ur5|xarm7]
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from lapwrench.config import Config, load
 from lapwrench.controller import Controller
 from lapwrench.jit import bind, kernel
 from lapwrench.motion.reference_shaper import advance_reference
+from lapwrench.robot_kinds import ROBOT_KINDS
 from lapwrench.sensors import (
     ForceTorqueReading,
     InstrumentObservation,
@@ -34,7 +35,7 @@ from lapwrench.sensors import (
 )
 from lapwrench.tick_core import SaturationInputs, saturation_stage
 from lapwrench.tick_params import TickParams
-from lapwrench.virtual import DEFAULT_Q0
+from lapwrench.virtual import home_pose
 
 
 def percentiles_us(samples_ns: list[int]) -> tuple[float, float]:
@@ -86,7 +87,7 @@ def time_interleaved(cfg: Config, ticks: int) -> dict[str, Variant]:
     variants = {}
     for name, push in (("tick", 0.0), ("push", 30.0)):
         ctrl = Controller(cfg)
-        ctrl.reset(DEFAULT_Q0)
+        ctrl.reset(home_pose(cfg.robot.kind))
         variants[name] = Variant(ctrl, push)
     rngs = {name: np.random.default_rng(0) for name in variants}
     tactile = TactileReading(np.full(64, 62.5))
@@ -135,7 +136,7 @@ def time_steps(v: Variant, repeats: int) -> tuple[list[int], list[int], int]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--ticks", type=int, default=20000)
-    ap.add_argument("--robot", default="panda", choices=["panda", "fr3"])
+    ap.add_argument("--robot", default="panda", choices=ROBOT_KINDS)
     args = ap.parse_args()
     if args.ticks < 100:
         ap.error("--ticks must be at least 100")
@@ -152,8 +153,8 @@ def main() -> None:
     model, data = ctrl.model.model, ctrl.model.data
     clock = time.perf_counter_ns
     cat_ns: list[int] = []
-    q = DEFAULT_Q0.copy()
-    v = 0.1 * np.ones(7)
+    q = home_pose(args.robot)
+    v = 0.1 * np.ones(q.shape[0])
     for k in range(args.ticks + 1000):
         t0 = clock()
         pin.computeAllTerms(model, data, q, v)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -32,3 +34,21 @@ def make_renderable_world(scene: Scene | None = None) -> SimWorld:
         w.close()
         pytest.skip(f"headless rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}")
     return w
+
+
+FT_RATE_HZ = 400.0  # the simulated F/T box's record rate: modest, for 2 slow CI cores
+
+
+def wait_until(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.005) -> bool:
+    """Poll ``cond`` until it holds or ``timeout`` seconds pass; its last value."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()
+
+
+def open_fds() -> set[str]:
+    """This process's open file descriptors (Linux): shows a driver's socket or file come and go."""
+    return set(os.listdir("/proc/self/fd"))

@@ -49,11 +49,11 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 ROOT = "lapwrench"
 
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("base", ("lapwrench", "lapwrench.jit", "lapwrench.config_yaml", "lapwrench.config_ranges", "lapwrench.config",
-              "lapwrench.buffer", "lapwrench.cli_types")),
+    ("base", ("lapwrench", "lapwrench.jit", "lapwrench.config_yaml", "lapwrench.config_ranges", "lapwrench.plugins",
+              "lapwrench.config_cues", "lapwrench.config", "lapwrench.buffer", "lapwrench.cli_types")),
     ("spatial", ("lapwrench.spatial", "lapwrench.shaping")),
     ("robot", ("lapwrench.robot",)),
-    ("sensors", ("lapwrench.sensors",)),
+    ("sensors", ("lapwrench.inputs", "lapwrench.sensors")),
     ("geometry", ("lapwrench.rcm",)),
     ("control-terms", ("lapwrench.wrenches", "lapwrench.allocation", "lapwrench.motion")),
     ("control", ("lapwrench.tick_params", "lapwrench.tick_core", "lapwrench.compiled_tick", "lapwrench.controller")),
@@ -68,7 +68,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("perception", ("lapwrench.perception",)),
     ("sim", ("lapwrench.sim",)),
     ("hardware", ("lapwrench.hardware",)),
-    ("apps", ("lapwrench.cli", "lapwrench.perception.cli")),
+    ("apps", ("lapwrench.cli", "lapwrench.perception.cli", "lapwrench.ui")),
 )
 """Lowest layer first: (layer name, its units). See the module docstring."""
 

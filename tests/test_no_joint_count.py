@@ -1,6 +1,6 @@
 """No literal joint count outside the robot specs (issue 13, "Robots as data").
 
-The arm's joint count comes from its spec (:data:`lapwrench.robot.description.ARM_SPECS`), the
+The arm's joint count comes from its spec (:data:`lapwrench.robot.arms.ARM_SPECS`), the
 model built from it (``RobotModel.nq``/``nv``) or the limits (:mod:`lapwrench.robot.limits`), never
 from a ``7`` written into the code. The scan is static (:mod:`ast`, nothing is imported) over
 ``src/lapwrench`` and flags a literal 7 where it sizes or checks a joint vector:
@@ -27,8 +27,9 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "lapwrench"
 JOINTS = 7  # the count the Franka arms have: what must not be written into the code
 
 ALLOWED: dict[str, str] = {
-    "robot/description.py": "the robot specs (ARM_SPECS): joint names, start poses, servo gains",
-    "robot/limits.py": "the robots' per-joint limit tables",
+    "robot/arms/panda.py": "the Panda's spec: start poses, servo gains, limit tables (shared with the FR3)",
+    "robot/arms/fr3.py": "the FR3's spec: its limit tables",
+    "robot/arms/xarm7.py": "the xArm7's spec: start poses, servo gains, limit tables",
     "hardware/franka.py": "the Franka driver (the hardware path is Franka-only): libfranka's collision thresholds",
 }
 

@@ -66,11 +66,12 @@ class LatestValue(Generic[T]):
 
     __slots__ = ("_cond", "_name", "_sample", "_seq")
 
-    def __init__(self, name: str = "") -> None:
+    def __init__(self, name: str = "", lock: threading.Lock | None = None) -> None:
+        """``lock`` serialises the writers (a new one unless given; readers never take it)."""
         self._name = name
         self._sample: Sample[T] | None = None
         self._seq = 0
-        self._cond = threading.Condition(threading.Lock())
+        self._cond = threading.Condition(threading.Lock() if lock is None else lock)
 
     @property
     def name(self) -> str:

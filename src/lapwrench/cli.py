@@ -43,13 +43,14 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from lapwrench.controller import Controller
-    from lapwrench.virtual import DEFAULT_Q0, HandScript, limits_report, plot_virtual, run_virtual
+    from lapwrench.virtual import HandScript, home_pose, limits_report, plot_virtual, run_virtual
 
     cfg = _load_config(args.config)
     out = _writable_dir(Path(args.out))
     ctrl = Controller(cfg)
-    ctrl.reset(DEFAULT_Q0)
-    kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(ctrl.model.nv))
+    q0 = home_pose(cfg.robot.kind)
+    ctrl.reset(q0)
+    kin = ctrl.model.kinematics(q0, np.zeros(ctrl.model.nv))
     depth = 0.07
     # an instrument tip sliding over tissue 7 cm ahead of the camera
     centre = kin.p_C + depth * kin.d_z
@@ -88,7 +89,7 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     modes: dict[str, float] = {}
     for r in log.results:
         modes[r.mode] = modes.get(r.mode, 0.0) + cfg.robot.dt
-    usage = limits_report(ctrl, log, DEFAULT_Q0)
+    usage = limits_report(ctrl, log, q0)
     metrics = {
         "duration_s": duration,
         "rcm_error_max_mm": float(err.max()),
@@ -125,6 +126,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             video=not args.no_video,
             detector=args.detector,
             workers=args.workers,
+            robot=args.robot,
         )
     except DemoError as exc:  # a bad argument or input file, found before anything ran
         raise UsageError(str(exc)) from exc
@@ -157,6 +159,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="grip, rcm-disturbance, needle-search, workflow, hard-push (default: all)",
     )
     demo.add_argument("--config", help="YAML configuration or preset for every scenario (default: the paper's)")
+    demo.add_argument(
+        "--robot", metavar="NAME", default=None,
+        help="the simulated arm: panda (default: the config's robot.kind), fr3, ur5 or xarm7 (ur5 and xarm7 leave out"
+        " hard-push, tuned for the Franka)",
+    )
     demo.add_argument("--tracking-config", help="configuration for needle-search and workflow")
     demo.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="random seed (0 to 2^32-1; default 0)")
     demo.add_argument(

@@ -16,6 +16,7 @@ import ipaddress
 import math
 import os
 import re
+import socket
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -188,6 +189,43 @@ def host_address(text: str) -> str:
     if not all(_HOST_LABEL.fullmatch(label) for label in host.rstrip(".").split(".")):
         _fail(what, text)
     return host
+
+
+FOXGLOVE_DEFAULT = "127.0.0.1:8765"
+
+
+def host_port(text: str) -> tuple[str, int]:
+    """``HOST:PORT``, ``HOST`` or ``:PORT`` (defaults 127.0.0.1 and 8765; ``[v6]:PORT`` for IPv6);
+    port 0 picks a free one."""
+    default_host, default_port = FOXGLOVE_DEFAULT.split(":")
+    body = text.strip()
+    host, port_text = body, None
+    if body.startswith("["):
+        host, bracket, rest = body[1:].partition("]")
+        if not bracket or (rest and not rest.startswith(":")):
+            _fail("must be HOST:PORT, [IPv6]:PORT, HOST or :PORT", text)
+        port_text = rest[1:] if rest else None
+    elif body.count(":") == 1:
+        host, port_text = body.split(":")
+    host = host_address(host) if host else default_host
+    port = int(default_port) if port_text is None else int_in(0, 65535)(port_text)
+    return host, port
+
+
+def listen_problem(host: str, port: int) -> str | None:
+    """Why a server could not listen on ``host:port`` (address unknown, port taken), or None: a bind
+    probe, released at once (port 0 always works)."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:
+        return f"cannot resolve {host}: {exc}"
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as s:
+        try:
+            s.bind(address)
+        except OSError as exc:
+            return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+    return None
 
 
 def hex_bytes(text: str) -> bytes:

@@ -5,10 +5,10 @@ warm-up: compilation or the cache load happen there, never in the loop), and the
 entry points each tick with arguments of exactly those types (:func:`lapwrench.jit.bind`):
 external arrays are made C-contiguous float64 first.
 
-Without extra wrench sources the tick is one call (:func:`~lapwrench.tick_core.tick_stage`). With
-them it is two, :func:`~lapwrench.tick_core.geometry_stage` and
-:func:`~lapwrench.tick_core.motion_stage`, with the extra sources evaluated in Python on the
-tick's geometry in between. Both give a :class:`StageResult`.
+When every configured cue is one of the paper's (fused into the compiled maths) the tick is one
+call (:func:`~lapwrench.tick_core.tick_stage`). With cues that run in Python (plugins) it is two,
+:func:`~lapwrench.tick_core.geometry_stage` and :func:`~lapwrench.tick_core.motion_stage`, with
+those cues evaluated on the tick's geometry in between. Both give a :class:`StageResult`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from lapwrench.motion.reference_shaper import advance_reference
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState, residual_force
 from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
 from lapwrench.sensors import ValidInputs
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, wrench_transform
 from lapwrench.tick_core import (
     SaturationInputs,
     fill_saturation_inputs,
@@ -34,9 +34,7 @@ from lapwrench.tick_core import (
     tick_stage,
 )
 from lapwrench.tick_params import TickParams
-from lapwrench.wrenches.base import DampingSource, TickContext, WrenchSource
-
-BUILT_IN_WRENCHES = ("rcm", "interaction", "tracking", "viscous")
+from lapwrench.wrenches.base import Cue, TickContext
 
 
 class StageResult(NamedTuple):
@@ -57,13 +55,16 @@ class StageResult(NamedTuple):
     ref: tuple[Vec, Vec, Vec] | None  # the next reference, when admitted or saturated in the compiled step
     clamped: bool
     at_bound: np.ndarray  # the limit rows (joint box, then envelope) at a bound when saturated
+    telemetry: dict[str, tuple[float, ...]]  # the Python cues' telemetry by cue name
 
 
 class _Extra(NamedTuple):
-    W: Mat  # one wrench [moment; force] per row
+    W: Mat  # one null-space wrench [moment; force] per row
     points: Mat  # the point each is taken about
-    D: Mat  # summed damping matrices of the damping sources
-    by_name: dict[str, Vec]
+    D: Mat  # summed damping matrices of the null-space cues that have one
+    task_F: Vec  # summed force of the task-space cues, at p_R
+    by_name: dict[str, Vec]  # every Python cue's wrench about p_G
+    telemetry: dict[str, tuple[float, ...]]
 
 
 _F64 = np.dtype(np.float64)
@@ -86,29 +87,22 @@ _ZERO3 = np.zeros(3)
 _NO_TACTILE = np.zeros(64)
 _NO_POINTS = np.zeros((0, 2))
 _NO_ROWS = np.zeros(0, dtype=bool)
-_NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), {})
+_NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), {}, {})
+_NO_TELEMETRY: dict[str, tuple[float, ...]] = {}
 
 
 class CompiledTick:
     """The compiled stages bound to one controller's state and configuration."""
 
-    def __init__(
-        self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, extra_sources: Sequence[WrenchSource]
-    ) -> None:
-        self.check_names(extra_sources)
+    def __init__(self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue]) -> None:
+        """``cues``: the cues that run in Python (not fused into the compiled maths), in order."""
         self.params = params
         self.rcm = rcm
         self.feedback = feedback
-        self.extra_sources = list(extra_sources)
+        self.cues = list(cues)
+        self.null_cues = [c for c in self.cues if c.priority == "null"]
+        self.task_cues = [c for c in self.cues if c.priority == "task"]
         self.sat = SaturationInputs.allocate(params.q_lo.shape[0])
-
-    @staticmethod
-    def check_names(extra_sources: Sequence[WrenchSource]) -> None:
-        """Raise ValueError when two sources share a name or one takes a built-in wrench's name."""
-        names = [s.name for s in extra_sources]
-        clash = sorted({n for n in names if names.count(n) > 1 or n in BUILT_IN_WRENCHES})
-        if clash:
-            raise ValueError(f"wrench source names must be unique and none of {BUILT_IN_WRENCHES}: {clash}")
 
     # -- arguments of fixed types --------------------------------------------------------------
     def _sensor_args(self, inputs: ValidInputs) -> tuple[object, ...]:
@@ -145,8 +139,8 @@ class CompiledTick:
         self, kin: Kinematics, Minv: Mat, geo: object, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec,
         stopping: bool, R_E0: Mat,
     ) -> tuple[object, ...]:
-        return (kin, Minv, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, _f64(ddq_ref),
-                bool(stopping), R_E0, float(self.feedback.offsets[3]), self.params)
+        return (kin, Minv, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
+                _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), self.params)
 
     # -- warm-up -------------------------------------------------------------------------------
     def bind(self, terms: KinematicTerms, Minv: Mat, R_E0: Mat) -> None:
@@ -181,8 +175,8 @@ class CompiledTick:
     ) -> StageResult:
         """The compiled maths of one tick (module docstring); :attr:`sat` then holds the saturation inputs."""
         measured, has_measured = self.feedback.measured_axis(None if inputs.robot is None else inputs.robot.q)
-        if self.extra_sources:
-            return self._run_with_extras(t, terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0,
+        if self.cues:
+            return self._run_with_cues(t, terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0,
                                          may_admit)
         args = self._tick_args(terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0, may_admit)
         vec3, W, ref, at, tau, delta, contacts, has_res, non_finite, admitted, saturated, clamped = self._tick_stage(
@@ -190,13 +184,22 @@ class CompiledTick:
         )
         e_R, p_R, p_G, F_lat, residual = vec3  # row views (unpacking is cheaper than indexing)
         W_r, W_h, W_c, W_f, W_n = W
-        wrenches = {"rcm": W_r, "interaction": W_h, "tracking": W_c, "viscous": W_f}
         return StageResult(
-            e_R, p_R, p_G, F_lat, residual if has_res else None, wrenches, W_n, tau, delta, contacts,
-            non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
+            e_R, p_R, p_G, F_lat, residual if has_res else None, self._paper_wrenches(W_r, W_h, W_c, W_f), W_n, tau,
+            delta, contacts, non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
+            _NO_TELEMETRY,
         )
 
-    def _run_with_extras(
+    def _paper_wrenches(self, W_r: Vec, W_h: Vec, W_c: Vec, W_f: Vec) -> dict[str, Vec]:
+        """The compiled cues' wrenches by name, those the configuration has on."""
+        p = self.params
+        if p.cue_interaction and p.cue_tracking and p.cue_viscous:
+            return {"rcm": W_r, "interaction": W_h, "tracking": W_c, "viscous": W_f}  # the common case
+        on = (("rcm", W_r, True), ("interaction", W_h, p.cue_interaction), ("tracking", W_c, p.cue_tracking),
+              ("viscous", W_f, p.cue_viscous))
+        return {name: w for name, w, used in on if used}
+
+    def _run_with_cues(
         self, t: float, terms: KinematicTerms, Minv: Mat, inputs: ValidInputs, measured: ScopeAxis,
         has_measured: bool, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> StageResult:
@@ -206,7 +209,7 @@ class CompiledTick:
         if ft is not None and robot is not None and robot.external_force is not None:
             residual = residual_force(kin.R_H @ _f64(ft.force), _f64(robot.external_force))
         geo, F_lat = self._geometry_stage(*self._geometry_args(kin, residual, measured, has_measured))
-        extra = self._extra(TickContext(t, kin, geo, inputs))
+        extra = self._evaluate_cues(TickContext(t, kin, geo, inputs))
         o = self._motion_stage(*self._motion_args(kin, Minv, geo, inputs, extra, ddq_ref, stopping, R_E0))
         fill_saturation_inputs(self.sat, o, kin, self.params.a_max)
         admitted = o.admitted and may_admit
@@ -217,21 +220,30 @@ class CompiledTick:
         elif may_admit:
             saturated, rows, at, clamped = self._saturation_stage(self.sat, Minv, kin.q, kin.dq, self.params)
             ref = (rows[0], rows[1], rows[2]) if saturated else None
-        wrenches = {"rcm": o.W_r, "interaction": o.W_h, "tracking": o.W_c, "viscous": o.W_f, **extra.by_name}
+        wrenches = {**self._paper_wrenches(o.W_r, o.W_h, o.W_c, o.W_f), **extra.by_name}
         return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, o.W_n, o.tau, o.delta, o.contacts,
-                           o.non_finite, admitted, ref, bool(clamped), at)
+                           o.non_finite, admitted, ref, bool(clamped), at, extra.telemetry)
 
-    def _extra(self, ctx: TickContext) -> _Extra:
-        """The extra sources' wrenches, the points they are taken about, their summed damping matrix."""
-        ws = [s.compute(ctx) for s in self.extra_sources]
+    def _evaluate_cues(self, ctx: TickContext) -> _Extra:
+        """The Python cues this tick: the null-space wrenches with their points and summed damping, the
+        task-space force at p_R, every wrench about p_G (eq 39) by name, and the telemetry."""
+        p_G = ctx.geometry.p_G
+        null = [c.compute(ctx) for c in self.null_cues]
+        task = [c.compute(ctx) for c in self.task_cues]
         D = np.zeros((6, 6))
-        for s in self.extra_sources:
-            if isinstance(s, DampingSource):
-                D += s.damping_matrix()
+        for c in self.null_cues:
+            Dc = c.damping_matrix(ctx)
+            if Dc is not None:
+                D += Dc
+        task_F = np.zeros(3)
+        for w in task:  # a task-space cue acts at p_R through J_R: its force, moved to p_R
+            task_F += w.force
+        wrenches = list(zip(self.null_cues + self.task_cues, null + task, strict=True))
         return _Extra(
-            _f64(np.array([w.vector for w in ws]).reshape(-1, 6)),
-            _f64(np.array([w.point for w in ws], dtype=float).reshape(-1, 3)),
+            _f64(np.array([w.vector for w in null]).reshape(-1, 6)),
+            _f64(np.array([w.point for w in null], dtype=float).reshape(-1, 3)),
             D,
-            {s.name: w.vector for s, w in zip(self.extra_sources, ws, strict=True)},
+            task_F,
+            {c.name: wrench_transform(np.asarray(w.point, dtype=float), p_G) @ w.vector for c, w in wrenches},
+            {c.name: tuple(float(x) for x in c.telemetry(ctx, w)) for c, w in wrenches if c.telemetry_fields},
         )
-

@@ -26,9 +26,11 @@ from typing import Any, Literal
 import yaml
 
 from lapwrench import config_yaml
+from lapwrench.config_cues import DEFAULT_CUES, CueEntry, cues_to_dict, parse_cues
 from lapwrench.config_ranges import ConfigError, build, ranged
 from lapwrench.config_ranges import Range as Range  # re-exported: a field's metadata["range"]
 from lapwrench.config_yaml import short
+from lapwrench.robot_kinds import NOT_SHIPPED, ROBOT_KINDS, unknown_kind_message
 
 Ramp = Literal["printed", "c1"]
 TactileChecksum = Literal["none", "sum8", "xor8", "crc16-modbus"]
@@ -39,11 +41,19 @@ TACTILE_MAX_VALUE = 255  # largest element reading
 
 @dataclass(frozen=True)
 class RobotConfig:
-    kind: Literal["panda", "fr3"] = "panda"
+    kind: str = "panda"  # a shipped arm: lapwrench.robot_kinds.ROBOT_KINDS (its spec: lapwrench.robot.arms)
     # the `run` and `demo` commands further require 1000 (the Franka differentiates over 1 ms)
     control_rate_hz: float = ranged("[1, 10000]", 1000.0, "Hz, a control rate")
     limit_fraction: float = ranged("[0.05, 1]", 0.9, "fraction of the Franka limits; below 5% the arm barely moves")
     position_margin: float = ranged("[0, 0.5]", 0.05, "rad; more would shrink some Franka joint ranges to nothing")
+
+    def __post_init__(self) -> None:
+        if self.kind in NOT_SHIPPED:
+            raise ConfigError(f"config key 'robot.kind': {unknown_kind_message(self.kind)}", "robot.kind")
+        if self.kind not in ROBOT_KINDS:
+            raise ConfigError(
+                f"config key 'robot.kind' must be one of {list(ROBOT_KINDS)}, got {short(self.kind)}", "robot.kind"
+            )
 
     @property
     def dt(self) -> float:
@@ -232,6 +242,11 @@ class Config:
     envelope: EnvelopeConfig = field(default_factory=EnvelopeConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     tactile: TactileConfig = field(default_factory=TactileConfig)
+    cues: tuple[CueEntry, ...] = DEFAULT_CUES  # the cues that run (lapwrench.config_cues)
+
+    def cue(self, name: str) -> CueEntry | None:
+        """The entry of the cue named ``name`` if it is configured and enabled, else None."""
+        return next((c for c in self.cues if c.name == name and c.enabled), None)
 
     def replace(self, **sections: dict[str, Any]) -> Config:
         """A copy with some values changed, e.g. ``cfg.replace(tracking={"ramp": "c1"})``; validated."""
@@ -284,13 +299,21 @@ def ensure_writable_dir(path: str | Path) -> Path:
 
 def from_dict(data: dict[str, Any]) -> Config:
     """Validate a nested mapping and build a :class:`Config` (missing keys take the defaults)."""
+    cues = DEFAULT_CUES
+    if isinstance(data, dict) and "cues" in data:  # its own parser: the cues' parameters come from plugins
+        cues = parse_cues(data["cues"])
+        data = {k: v for k, v in data.items() if k != "cues"}
     cfg = build(Config, data, "")
+    if cues is not DEFAULT_CUES:
+        cfg = dataclasses.replace(cfg, cues=cues)
     _check_consistency(cfg)
     return cfg
 
 
 def to_dict(cfg: Config) -> dict[str, Any]:
-    return dataclasses.asdict(cfg)
+    d = dataclasses.asdict(cfg)
+    d["cues"] = cues_to_dict(cfg.cues)
+    return d
 
 
 def presets() -> list[str]:

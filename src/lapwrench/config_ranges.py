@@ -99,11 +99,24 @@ def check_value(key: str, value: Any, annotation: Any, bounds: Range | None) -> 
         if not isinstance(value, str):
             raise ConfigError(f"config key '{key}' must be text, got {short(value)}", key)
         return value
+    if origin is tuple:
+        return _numbers(key, value, typing.get_args(annotation), bounds)
     value = number(key, value, annotation)
     if bounds is not None and value not in bounds:
         why = f" ({bounds.why})" if bounds.why else ""
         raise ConfigError(f"config key '{key}' must lie in {bounds}{why}, got {short(value)}", key)
     return value
+
+
+def _numbers(key: str, value: Any, args: tuple[Any, ...], bounds: Range | None) -> tuple[Any, ...]:
+    """A list of numbers for a ``tuple[float, ...]`` (any length but at least one) or a fixed-length
+    ``tuple[float, float, float]`` field; each element checked against the field's range."""
+    variadic = len(args) == 2 and args[1] is Ellipsis
+    if not isinstance(value, list | tuple) or (not variadic and len(value) != len(args)) or not value:
+        size = "one or more numbers" if variadic else f"{len(args)} numbers"
+        raise ConfigError(f"config key '{key}' must be a list of {size}, got {short(value)}", key)
+    kinds = [args[0]] * len(value) if variadic else list(args)
+    return tuple(check_value(f"{key}[{i}]", v, t, bounds) for i, (v, t) in enumerate(zip(value, kinds, strict=True)))
 
 
 def build(cls: type, data: Any, prefix: str) -> Any:

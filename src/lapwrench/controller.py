@@ -33,7 +33,8 @@ from lapwrench.sensors import (
 )
 from lapwrench.spatial import Vec
 from lapwrench.tick_params import TickParams
-from lapwrench.wrenches.base import WrenchSource
+from lapwrench.wrenches.base import Cue
+from lapwrench.wrenches.registry import build_cues, input_specs
 
 MAX_KEPT_EVENTS = 10_000
 # Ticks in a row in which the RCM task cannot be kept inside the joint limits before the arm stops
@@ -68,7 +69,8 @@ class TickResult(NamedTuple):
     dq_ref: Vec
     ddq_ref: Vec
     tau: Vec
-    wrenches: dict[str, Vec]
+    wrenches: dict[str, Vec]  # every running cue's wrench by its name: the paper's about their own points
+    # (rcm p_R, interaction p_H, tracking p_C, viscous p_G), the plugins' about p_G
     W_n: Vec
     e_R: Vec
     p_R: Vec
@@ -81,6 +83,7 @@ class TickResult(NamedTuple):
     limits_active: tuple[str, ...] = ()  # constraints saturated this tick: "joint3", "depth_max", "pivot_speed", ...
     rcm_infeasible: bool = False  # the RCM task could not be kept inside the limits: the controller is stopping
     events: tuple[InputEvent, ...] | list[InputEvent] = ()
+    telemetry: dict[str, tuple[float, ...]] | None = None  # the Python cues' telemetry fields by cue name
 
     @property
     def rcm_error(self) -> float:
@@ -93,23 +96,31 @@ class Controller:
 
     The maths of the tick is compiled (:mod:`lapwrench.tick_core`); :meth:`reset` binds and warms it
     up, so the first tick runs at full speed.
+
+    The cues are those of the configuration's ``cues:`` section (:func:`~lapwrench.wrenches.registry.build_cues`)
+    plus ``extra_cues`` (objects built in code, e.g. by the UI or a test). The paper's run inside the
+    compiled tick; the others (plugins) in Python between its two stages.
     """
 
     def __init__(
         self,
         cfg: Config,
         model: RobotModel | None = None,
-        extra_sources: Sequence[WrenchSource] = (),
+        extra_cues: Sequence[Cue] = (),
     ) -> None:
         self.cfg = cfg
         self.model = model or RobotModel(cfg.robot.kind, ScopeGeometry.from_config(cfg.scope))
         self.dt = cfg.robot.dt
+        self.cues: list[Cue] = build_cues(cfg) + list(extra_cues)
+        names = [c.name for c in self.cues]
+        if len(set(names)) != len(names):
+            raise ValueError(f"cue names must be unique, got {sorted(n for n in set(names) if names.count(n) > 1)}")
         self.validator = InputValidator(
             cfg.interaction, cfg.camera, self.model.limits, cfg.inputs.max_image_age,
-            max_instruments=cfg.inputs.max_instruments,
+            max_instruments=cfg.inputs.max_instruments, inputs=input_specs(self.cues),
         )
         self.params = TickParams.from_config(cfg, self.model.limits)
-        self.extra_sources: list[WrenchSource] = list(extra_sources)
+        self.python_cues = [c for c in self.cues if not c.fused]
         self.shaper = ReferenceShaper(
             self.model.limits, self.dt, cfg.robot.limit_fraction, cfg.robot.position_margin
         )
@@ -126,7 +137,6 @@ class Controller:
         self.event_counts: Counter[str] = Counter()
         # Test seam: f(reference, a_lo, a_hi) -> (a_lo, a_hi) narrows the joint box of a tick.
         self.bounds_hook: Callable[[ReferenceState, Vec, Vec], tuple[Vec, Vec]] | None = None
-        CompiledTick.check_names(self.extra_sources)
         n = self.model.nv
         self._box_names = tuple(f"joint{i + 1}" for i in range(n))
         self._hard = np.arange(n + 4) < n  # the joint box is hard, the envelope gives way to it
@@ -175,7 +185,7 @@ class Controller:
         self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
         self.envelope.reset(kin)
         self.feedback.reset()
-        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.extra_sources)
+        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues)
         terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
         self.compiled.bind(terms, self.model.mass_matrix_inverse(q0), self.envelope.R_E0)
@@ -223,10 +233,12 @@ class Controller:
         if e_norm > self.cfg.inputs.max_rcm_error:
             self._report([InputEvent(frame.time, "rcm", f"RCM error {e_norm * 1e3:.1f} mm")])
         wrenches = r.wrenches
-        mode = self._mode(r.delta > 0.0 and inputs.ft is not None, inputs.instruments, wrenches)
+        p = self.params
+        handle = p.cue_interaction and r.delta > 0.0 and inputs.ft is not None
+        mode = self._mode(handle, p.cue_tracking and inputs.instruments is not None, inputs.instruments, wrenches)
         return TickResult(  # positional: the fields in order (cheaper than keywords at 1 kHz)
             frame.time, q, dq, ddq, r.tau, wrenches, r.W_n, r.e_R, r.p_R, r.p_G, r.delta, r.contacts, mode,
-            r.residual_lateral, r.residual, limits_active, self.stopping, inputs.events,
+            r.residual_lateral, r.residual, limits_active, self.stopping, inputs.events, r.telemetry or None,
         )
 
     # -- pieces of the tick -------------------------------------------------------------------
@@ -237,10 +249,12 @@ class Controller:
             self.event_counts[e.source] += 1
 
     @staticmethod
-    def _mode(handle_engaged: bool, instruments: InstrumentObservation | None, wrenches: dict[str, Vec]) -> Mode:
+    def _mode(
+        handle_engaged: bool, tracking_on: bool, instruments: InstrumentObservation | None, wrenches: dict[str, Vec]
+    ) -> Mode:
         """:func:`classify_mode` of this tick; the force norms only when both cues are engaged (the
         only case that compares them)."""
-        tracking_engaged = instruments is not None and len(instruments.points) > 0
+        tracking_engaged = tracking_on and instruments is not None and len(instruments.points) > 0
         if handle_engaged and tracking_engaged:
             return classify_mode(True, True, _norm(wrenches["interaction"][3:]), _norm(wrenches["tracking"][3:]))
         return classify_mode(handle_engaged, tracking_engaged, 0.0, 0.0)

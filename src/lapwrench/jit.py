@@ -38,13 +38,15 @@ _PACKAGE = Path(__file__).resolve().parent
 _KEEP_CACHES = 4  # older cache directories (other source versions) are pruned beyond this many
 
 
-def source_hash() -> str:
-    """SHA-256 (16 hex digits) of every module of the package that defines or configures kernels."""
+def source_hash(package: Path | None = None) -> str:
+    """SHA-256 (16 hex digits) of every module of ``package`` (default: lapwrench's folder) that
+    defines or configures kernels."""
+    root = _PACKAGE if package is None else package
     h = hashlib.sha256()
-    for path in sorted(_PACKAGE.rglob("*.py")):
+    for path in sorted(root.rglob("*.py")):
         text = path.read_bytes()
         if b"@kernel" in text or b"njit" in text or path.name == "jit.py":
-            h.update(str(path.relative_to(_PACKAGE)).encode() + b"\0" + text + b"\0")
+            h.update(str(path.relative_to(root)).encode() + b"\0" + text + b"\0")
     return h.hexdigest()[:16]
 
 

@@ -236,8 +236,8 @@ class ControlLoop:
             self._note_freshness(t, s.kind, r is not None)
             readings[s.kind] = r
         return SensorFrame(
-            time=t, ft=readings.get("ft"), tactile=readings.get("tactile"),
-            instruments=readings.get("instruments"), robot=reading,
+            time=t, ft=readings.pop("ft", None), tactile=readings.pop("tactile", None),
+            instruments=readings.pop("instruments", None), robot=reading, extra=readings,  # the rest: registered inputs
         )
 
     def _note_freshness(self, t: float, name: str, is_fresh: bool) -> None:

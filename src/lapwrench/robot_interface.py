@@ -8,6 +8,12 @@ raises :class:`~lapwrench.robot.errors.RobotError`.
 
 It lives above :mod:`lapwrench.sensors` (whose readings it returns), in the loop layer, not in
 :mod:`lapwrench.robot`, which the sensors themselves use.
+
+A new robot driver implements this protocol: ``kind`` (the name of the arm's spec in
+:mod:`lapwrench.robot.arms`, whose joint count sizes every vector), ``dt`` (its control period),
+:meth:`~RobotInterface.connect`, :meth:`~RobotInterface.read`, :meth:`~RobotInterface.command` and
+:meth:`~RobotInterface.disconnect`; the arm's spec then sets ``hardware=True``. The shipped driver is
+the Franka's (:class:`lapwrench.hardware.franka.FrankaRobot`).
 """
 
 from __future__ import annotations
@@ -21,8 +27,8 @@ from lapwrench.spatial import Vec
 
 @runtime_checkable
 class RobotInterface(Protocol):
-    kind: RobotKind
-    dt: float
+    kind: RobotKind  # a registered arm's name (lapwrench.robot.arms.ARM_SPECS)
+    dt: float  # s, the control period (the spec's command_period_s)
 
     def connect(self) -> RobotReading:
         """Open the connection, start joint position control and return the first state."""

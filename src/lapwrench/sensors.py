@@ -8,11 +8,14 @@ invalid reaches the command.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from lapwrench.config import CameraConfig, InteractionConfig
+from lapwrench.inputs import InputSpec, Reading, fresh_stamp, real_array
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec
@@ -69,6 +72,7 @@ class SensorFrame:
     tactile: TactileReading | None = None
     instruments: InstrumentObservation | None = None
     robot: RobotReading | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)  # registered inputs by name (lapwrench.inputs)
 
 
 @dataclass(frozen=True)
@@ -87,43 +91,18 @@ class ValidInputs:
     instruments: InstrumentObservation | None = None
     robot: RobotReading | None = None
     events: list[InputEvent] = field(default_factory=list)
+    extra: dict[str, Reading] = field(default_factory=dict)  # registered inputs that passed their spec
 
 
 _F64 = np.dtype(np.float64)
-
-
-def _real_array(x: object) -> np.ndarray | None:
-    """``x`` as a C-contiguous float64 array if it holds real numbers (ints or floats; not strings,
-    booleans, complex values or objects), else None."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.flags.carray:  # C-contiguous, aligned, writeable
-        return x  # the common case, checked cheaply
-    try:
-        a = np.asarray(x)
-    except (TypeError, ValueError):  # ragged nesting, unconvertible objects
-        return None
-    if a.dtype.kind not in "fiu":
-        return None
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    return a if a.flags.aligned else a.copy()  # the compiled checks read aligned memory
 
 
 def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
     if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (n,) and x.flags.carray:
         return x  # the common case, checked cheaply
-    a = _real_array(x)
+    a = real_array(x)
     return a if a is not None and a.shape == (n,) else None
-
-
-def _fresh(stamp: object, now: float, max_age: float) -> bool:
-    """A real, finite stamp at most ``max_age`` before ``now`` (and not after it by more than that)."""
-    if type(stamp) not in (float, int) and not isinstance(stamp, np.floating | np.integer):
-        return False
-    try:
-        stamp = float(stamp)  # type: ignore[arg-type]
-    except OverflowError:  # an int beyond any float, e.g. 10**400
-        return False
-    return math.isfinite(stamp) and abs(now - stamp) <= max_age if math.isfinite(now) else False
 
 
 # Status codes of the compiled checks below (0: valid).
@@ -191,6 +170,7 @@ class InputValidator:
         velocity_factor: float = 1.5,
         max_external_force: float = 300.0,
         max_instruments: int = 8,
+        inputs: Mapping[str, InputSpec] | None = None,
     ) -> None:
         self.interaction = interaction
         self.camera = camera
@@ -200,6 +180,7 @@ class InputValidator:
         self.velocity_factor = velocity_factor
         self.max_external_force = max_external_force
         self.max_instruments = max_instruments
+        self.inputs = dict(inputs or {})  # the registered inputs the cues ask for, by name
         self._q_lo = np.ascontiguousarray(limits.position_lower, dtype=np.float64)
         self._q_hi = np.ascontiguousarray(limits.position_upper, dtype=np.float64)
         self._dq_max = np.ascontiguousarray(velocity_factor * limits.velocity, dtype=np.float64)
@@ -223,7 +204,23 @@ class InputValidator:
         tactile = None if frame.tactile is None else self._tactile(frame.tactile, t, events)
         instruments = None if frame.instruments is None else self._instruments(frame, events)
         robot = None if frame.robot is None else self._robot(frame.robot, t, events)
-        return ValidInputs(ft, tactile, instruments, robot, events)
+        extra = self._extra(frame.extra, t, events) if frame.extra else {}
+        return ValidInputs(ft, tactile, instruments, robot, events, extra)
+
+    def _extra(self, readings: Mapping[str, Any], t: float, events: list[InputEvent]) -> dict[str, Reading]:
+        """The registered inputs' readings that pass their :class:`~lapwrench.inputs.InputSpec`."""
+        valid: dict[str, Reading] = {}
+        for name, r in readings.items():
+            spec = self.inputs.get(name) if isinstance(name, str) else None
+            if spec is None:
+                events.append(InputEvent(t, "inputs", f"reading of an input no cue asked for: {str(name)[:40]!r}"))
+                continue
+            reading, why = spec.check(r, t)
+            if reading is None:
+                events.append(InputEvent(t, name, why))
+            else:
+                valid[name] = reading
+        return valid
 
     def _ft(self, r: ForceTorqueReading, t: float, events: list[InputEvent]) -> ForceTorqueReading | None:
         f, m = _vector(r.force, 3), _vector(r.torque, 3)
@@ -286,7 +283,7 @@ class InputValidator:
         def reject(source: str, message: str) -> None:
             events.append(InputEvent(frame.time, source, message))
 
-        pts = _real_array(frame.instruments.points)
+        pts = real_array(frame.instruments.points)
         if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
             reject("instruments", "image points must be (n, 2) real numbers")
             return None
@@ -300,7 +297,7 @@ class InputValidator:
             reject("instruments", "image point is not finite")
         elif status == OUT_OF_RANGE:
             reject("instruments", f"image point outside the {cam.width}x{cam.height} image")
-        elif not _fresh(frame.instruments.stamp, frame.time, self.max_image_age):
+        elif not fresh_stamp(frame.instruments.stamp, frame.time, self.max_image_age):
             reject("instruments", f"detection older than {self.max_image_age} s")
         else:
             obs = frame.instruments

@@ -10,6 +10,10 @@ comes from a :class:`Source` of the same shape, whatever produces it:
   seconds), or None. The loop uses it only if it is at most :attr:`Source.max_age` old; an older
   one switches that cue's wrench off (and the loop reports the input as stale).
 
+Besides the three built-in kinds (``ft``, ``tactile``, ``instruments``) a source may have the kind
+of a registered input (:mod:`lapwrench.inputs`): its readings fill ``SensorFrame.extra`` under
+that name. :func:`simulated_input` builds the simulated source of such an input.
+
 Simulated sources are :class:`Observable` s, after dm_control's observables: a ``read(t)`` of the
 world every ``update_interval`` seconds, which arrives ``delay`` seconds later, through an optional
 ``corruptor`` (noise, bias, dropout). Hardware sources are :class:`BufferSource` s over a driver's
@@ -26,10 +30,18 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 import numpy as np
 
 from lapwrench.buffer import LatestValue
+from lapwrench.inputs import BUILT_IN_INPUTS, InputSpec, Reading
+from lapwrench.plugins import NAME
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, TactileReading
 
-R = TypeVar("R", ForceTorqueReading, TactileReading, InstrumentObservation)
-KINDS = ("ft", "tactile", "instruments")
+R = TypeVar("R", ForceTorqueReading, TactileReading, InstrumentObservation, Reading)
+KINDS = BUILT_IN_INPUTS
+
+
+def _check_kind(kind: object) -> str:
+    if not (isinstance(kind, str) and (kind in KINDS or NAME.match(kind))):
+        raise ValueError(f"source kind must be one of {KINDS} or a registered input's name, got {kind!r}")
+    return kind
 
 
 @runtime_checkable
@@ -69,8 +81,7 @@ class Observable:
         corruptor: Callable[[R, np.random.Generator], R | None] | None = None,
         seed: int = 0,
     ) -> None:
-        if kind not in KINDS:
-            raise ValueError(f"source kind must be one of {KINDS}, got {kind!r}")
+        _check_kind(kind)
         if not (math.isfinite(update_interval) and update_interval > 0):
             raise ValueError(f"update_interval must be positive, got {update_interval!r}")
         if not (math.isfinite(delay) and delay >= 0):
@@ -112,9 +123,7 @@ class BufferSource:
     def __init__(
         self, kind: str, buffer: LatestValue[Any], convert: Callable[[Any, float], R], *, max_age: float
     ) -> None:
-        if kind not in KINDS:
-            raise ValueError(f"source kind must be one of {KINDS}, got {kind!r}")
-        self.kind = kind
+        self.kind = _check_kind(kind)
         self.buffer = buffer
         self.convert = convert
         self.max_age = _check_age(max_age, kind)
@@ -141,6 +150,21 @@ def tactile_reading(value: Any, stamp: float) -> TactileReading:
 def instruments_reading(value: Any, stamp: float) -> InstrumentObservation:
     """A detector's observation (image ``points``) stamped with its sample's time."""
     return InstrumentObservation(value.points, stamp)
+
+
+def simulated_input(spec: InputSpec, world: Any, seed: int = 0) -> Observable:
+    """The simulated source of a registered input: ``spec.simulate(world)`` sampled every
+    ``spec.update_interval`` s, arriving ``spec.delay`` s later (ValueError if it has none)."""
+    if spec.simulate is None:
+        raise ValueError(f"input {spec.name!r} has no simulated source (its InputSpec.simulate is None)")
+    read = spec.simulate(world)
+
+    def sample(t: float) -> Reading | None:
+        value = read(t)
+        return None if value is None else Reading(np.asarray(value, dtype=float), t)
+
+    return Observable(spec.name, sample, update_interval=spec.update_interval, delay=spec.delay,
+                      max_age=spec.max_age, seed=seed)
 
 
 def fresh(source: Source, now: float) -> Any | None:

@@ -10,7 +10,9 @@ kinematics and M⁻¹ once per tick; everything after that is two compiled calls
    37-39), the self-motion terms, the integration of the virtual model, the joint-limit box and
    the envelope rows.
 
-Between them the controller evaluates any extra (Python) wrench sources on the tick's geometry.
+Between them the controller evaluates the cues that run in Python (plugins,
+:mod:`lapwrench.wrenches.base`) on the tick's geometry; the paper's four run here, each only when
+the configuration's ``cues:`` section has it on.
 When the desired acceleration breaks a limit, :func:`saturation_stage` meets the joint box and
 the envelope by changing the lower-priority motion only (the exact QP of
 :mod:`lapwrench.motion.saturation`, compiled); only when that has no solution (the envelope must
@@ -153,26 +155,31 @@ def motion_stage(
     extra_W: Mat,
     extra_points: Mat,
     extra_D: Mat,
+    extra_task_F: Vec,
     ddq_ref: Vec,
     stopping: bool,
     R_E0: Mat,
     depth_offset: float,
     p: TickParams,
 ) -> MotionOutput:
-    """Steps 4-7 of the tick (module docstring); ``extra_*`` are the extra sources' wrenches (rows
-    about ``extra_points``) and the sum of their damping matrices (eq 40's form, 6 x 6)."""
-    # 4. wrenches (eq 5-14, 40), each in {B} about its own point
+    """Steps 4-7 of the tick (module docstring). ``extra_*`` come from the cues that run in Python:
+    the null-space cues' wrenches (rows about ``extra_points``) and the sum of their damping
+    matrices (eq 40's form, 6 x 6), and the task-space cues' summed force at p_R."""
+    # 4. wrenches (eq 5-14, 40), each in {B} about its own point; the paper's cues the config switched on
     W_r = np.zeros(6)
     W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
     delta, contacts = 0.0, 0
     if has_tactile:
         delta, contacts = grip_gain(tactile, p.k_H, p.k_min, p.contact_threshold)
     W_h = np.zeros(6)
-    if has_ft and delta != 0.0:
+    if p.cue_interaction and has_ft and delta != 0.0:
         W_h[:3], W_h[3:] = interaction_wrench(ft_force, ft_torque, kin.R_H, delta)
     W_c = np.zeros(6)
-    W_c[3:] = virtual_force(points, p.tracking, kin.R_C)
-    D = p.D_guided if delta > 0.0 else p.D_unguided
+    if p.cue_tracking:
+        W_c[3:] = virtual_force(points, p.tracking, kin.R_C)
+    D = np.zeros((6, 6))
+    if p.cue_viscous:
+        D = p.D_guided if delta > 0.0 else p.D_unguided
     W_f = -D @ (geo.J_G @ kin.dq)
 
     # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
@@ -192,7 +199,7 @@ def motion_stage(
     push = np.zeros(kin.q.shape[0])
     if p.joint_limit_stiffness != 0.0:
         push = joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
-    tau = task_priority_torque(geo.J_R, W_r[3:], N_r, tau_n) + N_E_T @ push - B_self @ kin.dq
+    tau = task_priority_torque(geo.J_R, W_r[3:] + extra_task_F, N_r, tau_n) + N_E_T @ push - B_self @ kin.dq
 
     # 6. integration of the virtual model, damping terms implicit
     B = damping_jacobian(geo.J_R, p.Kd, N_r, geo.J_G, D + extra_D, B_self)
@@ -320,7 +327,7 @@ def tick_stage(
     geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
     o = motion_stage(
         kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
-        np.zeros((0, 3)), np.zeros((6, 6)), ddq_ref, stopping, R_E0, offsets[3], p,
+        np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], p,
     )
     fill_saturation_inputs(sat, o, kin, p.a_max)
     vec3 = np.empty((5, 3))

@@ -44,6 +44,9 @@ class TickParams(NamedTuple):
     envelope: EnvelopeParams
     feedback_gain: float  # dt / FEEDBACK_TIME of motion/measured_feedback.py
     feedback_cap: float  # m, 2 x safety.max_rcm_error
+    cue_interaction: bool  # the paper's cues that run inside the compiled tick (the ``cues:`` section)
+    cue_tracking: bool
+    cue_viscous: bool
 
     @staticmethod
     def from_config(cfg: Config, limits: JointLimits) -> TickParams:
@@ -75,4 +78,13 @@ class TickParams(NamedTuple):
             envelope=EnvelopeParams.from_config(cfg.envelope),
             feedback_gain=float(cfg.robot.dt / max(FEEDBACK_TIME, cfg.robot.dt)),
             feedback_cap=float(2.0 * cfg.safety.max_rcm_error),
+            cue_interaction=_fused(cfg, "interaction"),
+            cue_tracking=_fused(cfg, "tracking"),
+            cue_viscous=_fused(cfg, "viscous"),
         )
+
+
+def _fused(cfg: Config, name: str) -> bool:
+    """Whether the paper's cue ``name`` runs (in the compiled tick): enabled, and not replaced by a plugin."""
+    entry = cfg.cue(name)
+    return entry is not None and entry.type == name

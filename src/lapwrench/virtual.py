@@ -17,7 +17,8 @@ from lapwrench.config import CameraConfig, Config
 from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
 from lapwrench.rcm.geometry import closest_point
-from lapwrench.robot.description import ARM_SPECS, RobotKind
+from lapwrench.robot.arms import arm_spec
+from lapwrench.robot.description import RobotKind
 from lapwrench.robot.limits import limit_usage
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading
@@ -25,7 +26,13 @@ from lapwrench.sources import Observable, Source
 from lapwrench.spatial import Mat, Vec
 
 # Scope pointing straight down, arm comfortably inside its limits: the Panda's (and FR3's) home pose.
-DEFAULT_Q0 = np.array(ARM_SPECS["panda"].home_pose)
+DEFAULT_Q0 = np.array(arm_spec("panda").home_pose)
+
+
+def home_pose(kind: RobotKind) -> Vec:
+    """The controller's default start of arm ``kind`` (its spec's ``home_pose``, rad): where virtual
+    runs start unless told otherwise."""
+    return np.array(arm_spec(kind).home_pose, dtype=float)
 
 
 def project_points(points: Vec, p_C: Vec, R_C: Mat, cam: CameraConfig) -> tuple[Vec, np.ndarray]:
@@ -103,7 +110,7 @@ def run_virtual(
     duration: float,
     hand: HandScript | None = None,
     instruments: Callable[[float], Vec] | None = None,
-    q0: Vec = DEFAULT_Q0,
+    q0: Vec | None = None,
     p_R: Vec | None = None,
     controller: Controller | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -111,13 +118,13 @@ def run_virtual(
     """Run the controller for ``duration`` seconds through the one control loop
     (:class:`lapwrench.loop.ControlLoop`) on its own virtual model (:class:`VirtualRobot`), with the
     safety supervisor in the path. A supervisor alarm ends the run (the arm stopped to rest first);
-    ``VirtualLog.alarm`` says why.
+    ``VirtualLog.alarm`` says why. ``q0`` defaults to the configured arm's :func:`home_pose`.
     """
     ctrl = controller or Controller(cfg)
     hand = hand or HandScript()
     log = VirtualLog()
     dt = cfg.robot.dt
-    robot = VirtualRobot(cfg.robot.kind, q0, dt)
+    robot = VirtualRobot(cfg.robot.kind, home_pose(cfg.robot.kind) if q0 is None else q0, dt)
     clock = [0.0]
     pixels = [np.zeros((0, 2))]
 

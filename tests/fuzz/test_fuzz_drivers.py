@@ -14,12 +14,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers import wait_until
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from lapwrench.buffer import RateMonitor
-from lapwrench.drivers.base import DeviceOpenError, EndOfStream, PacketError
+from lapwrench.drivers.base import DeviceOpenError, PacketError
 from lapwrench.drivers.camera import Camera, to_rgb
 from lapwrench.drivers.ft import (
     RECORD_SIZE,
@@ -30,6 +31,7 @@ from lapwrench.drivers.ft import (
     pack_record,
     unpack_record,
 )
+from lapwrench.drivers.ft import Wrench as FtWrench
 from lapwrench.drivers.tactile import ChecksumType, TactileFrameFormat, TactileFrameParser
 
 U32 = 1 << 32
@@ -62,13 +64,9 @@ def test_unpack_record_returns_a_record_or_a_packet_error(data: bytes) -> None:
     assert pack_record(rec.sequence, rec.ft_sequence, rec.status, rec.counts) == data
 
 
-def _feed(sensor: UdpForceTorqueSensor, packets: list[bytes]) -> None:
-    """What the reader thread does with each datagram (no socket): handle it, count a PacketError."""
-    for k, data in enumerate(packets):
-        try:
-            sensor._handle_datagram(data, float(k))
-        except PacketError as exc:
-            sensor._record_malformed(exc)
+def _feed(sensor: UdpForceTorqueSensor, packets: list[bytes]) -> list[FtWrench]:
+    """What the reader thread does with each datagram (no socket); the wrenches published."""
+    return [sensor.latest().value for k, data in enumerate(packets) if sensor.feed(data, float(k))]
 
 
 def _check_published(sensor: UdpForceTorqueSensor, n_fed: int) -> None:
@@ -88,13 +86,12 @@ def _check_published(sensor: UdpForceTorqueSensor, n_fed: int) -> None:
 @given(st.sampled_from([OnRobotHexSensor, AtiNetFTSensor]), st.lists(datagrams, max_size=30))
 def test_ft_sensor_publishes_only_plausible_wrenches_and_counts_honestly(cls: type, packets: list[bytes]) -> None:
     sensor = cls("127.0.0.1", 9)  # never started: datagrams are handed over directly
-    published = []
-    sensor._publish_raw = lambda raw, rec, now, orig=sensor._publish_raw: (published.append(raw), orig(raw, rec, now))
-    _feed(sensor, packets)
+    published = _feed(sensor, packets)  # never tared: the published wrench is the raw one
     _check_published(sensor, len(packets))
-    for raw in published:
-        assert np.isfinite(raw).all()
-        assert np.linalg.norm(raw[:3]) <= sensor.max_force and np.linalg.norm(raw[3:]) <= sensor.max_torque
+    assert sensor.status().samples == len(published)
+    for w in published:
+        assert np.isfinite(w.force).all() and np.isfinite(w.torque).all()
+        assert np.linalg.norm(w.force) <= sensor.max_force and np.linalg.norm(w.torque) <= sensor.max_torque
 
 
 @given(
@@ -112,9 +109,7 @@ def test_one_bad_record_costs_at_most_one_good_record(seq0: int, n: int, at: int
     clean = [pack_record((seq0 + i) % U32, i, 0, [i, 0, 0, 0, 0, 0]) for i in range(n)]
     at = min(at, n)
     packets = [*clean[:at], bad, *clean[at:]]
-    seen: list[int] = []
-    sensor._publish_raw = lambda raw, rec, now: seen.append(rec.ft_sequence)  # type: ignore[method-assign]
-    _feed(sensor, packets)
+    seen = [w.ft_sequence for w in _feed(sensor, packets)]
     good = [s for s in seen if s in range(n)]
     assert len(set(good)) >= n - 1, f"the bad record cost {n - len(set(good))} good records"
     rm = sensor.rate.stats()
@@ -202,7 +197,7 @@ def _feed_all(parser: TactileFrameParser, chunks: list[bytes]) -> list[np.ndarra
 def _check_counters(parser: TactileFrameParser, fed: int) -> None:
     """Every byte fed is in exactly one place: a frame, garbage, a rejected candidate's first byte, the buffer."""
     assert min(parser.frames, parser.malformed, parser.garbage_bytes) >= 0
-    assert parser.frames * parser.fmt.frame_size + parser.garbage_bytes + parser.malformed + len(parser._buf) == fed
+    assert parser.frames * parser.fmt.frame_size + parser.garbage_bytes + parser.malformed + parser.pending == fed
 
 
 @given(streams(), st.data())
@@ -309,23 +304,15 @@ def clean_video(tmp_path_factory: pytest.TempPathFactory) -> bytes:
 
 
 def _play(path: Path) -> Camera | None:
-    """Run the grabber's read loop in this thread (as its reader thread would) to the end of the file."""
-    cam = Camera(path, pace=False, expected_size=(VW, VH))
+    """Run the grabber on the file (unpaced) until its reader thread reaches the end, or stops."""
     try:
-        cam._open()
+        cam = Camera(path, pace=False, expected_size=(VW, VH)).start()
     except DeviceOpenError:
         return None
     try:
-        for _ in range(4 * VN):
-            try:
-                cam._read_once()
-            except PacketError as exc:
-                cam._record_malformed(exc)
-            except EndOfStream:
-                cam._finished = True
-                break
+        wait_until(lambda: cam.status().finished or not cam.running, timeout=10.0)
     finally:
-        cam._close()
+        cam.stop()
     return cam
 
 
@@ -348,7 +335,7 @@ def test_a_truncated_or_corrupted_video_is_counted(clean_video: bytes, data: st.
     if cam is None:
         return  # refused at open, with DeviceOpenError naming the file
     st_ = cam.status()
-    assert cam._finished, "the read loop did not reach the end of the file"
+    assert cam.status().finished, "the read loop did not reach the end of the file"
     assert 1 <= st_.samples <= VN and min(st_.malformed, st_.drops, st_.io_errors) >= 0
     assert st_.drops <= VN
     frame = cam.latest().value

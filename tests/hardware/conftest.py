@@ -14,6 +14,8 @@ from hardware.support import FRANKYSIM_MISSING
 
 from lapwrench.config import Config, load
 from lapwrench.hardware.frankysim import FrankySimServer
+from lapwrench.hardware.rt import bus_layout
+from lapwrench.hardware.shm import Bus
 from lapwrench.virtual import DEFAULT_Q0
 
 
@@ -47,3 +49,13 @@ def sim_world() -> Iterator[Any]:
     w = SimWorld()
     yield w
     w.close()
+
+
+@pytest.fixture
+def bus() -> Iterator[Bus]:
+    """A small shared-memory bus (8 log rows, 16 event rows), unlinked after the test."""
+    b = Bus.create(bus_layout(log_rows=8, event_rows=16))
+    try:
+        yield b
+    finally:
+        b.close()

@@ -1,17 +1,22 @@
-"""ControlLoop's thread hygiene: the sensor threads keep running while the loop blocks in read()."""
+"""ControlLoop's thread hygiene (sensor threads keep running while the loop blocks in read()) and
+stale sources that never make it wait."""
 
 from __future__ import annotations
 
 import ctypes
 import sys
 import threading
+import time
 from typing import Any
 
 import numpy as np
 import pytest
 from hardware.support import build_loop
 
+from lapwrench.buffer import LatestValue
 from lapwrench.config import Config
+from lapwrench.drivers.ft import Wrench
+from lapwrench.hardware.runner import Sources
 from lapwrench.sim.robot import SimRobot
 
 # libc's usleep called through PyDLL keeps the GIL, as pylibfranka's readOnce does while it waits
@@ -87,3 +92,17 @@ def test_switch_interval_is_set_during_the_run_and_restored(sim_world: Any, pand
 def test_bad_switch_interval_is_refused(bad: float, sim_world: Any, panda_cfg: Config) -> None:
     with pytest.raises(ValueError, match="switch_interval"):
         build_loop(SimRobot(sim_world), panda_cfg, None, switch_interval=bad)
+
+
+def test_runner_with_stale_sources_never_waits(sim_world: Any, panda_cfg: Any) -> None:
+    ft: LatestValue[Any] = LatestValue("ft")
+    ft.put(Wrench(np.array([5.0, 0, 0]), np.zeros(3)), time.monotonic() - 10.0)  # long stale
+    tactile: LatestValue[Any] = LatestValue("tactile")  # never published
+    loop, log = build_loop(SimRobot(sim_world), panda_cfg, None)
+    loop.sources = Sources(ft=ft, tactile=tactile)
+    stats = loop.run(0.5)
+    assert stats.cycles >= 500 and stats.alarm is None
+    assert all(c.ft_force is None and c.tactile is None for c in log.cycles)
+    stale = [m for _, k, m in log.events if k == "input_stale"]
+    assert any(m.startswith("ft") for m in stale) and any(m.startswith("tactile") for m in stale)
+    assert np.percentile(stats.compute_us, 50) < 5000

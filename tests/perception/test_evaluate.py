@@ -13,7 +13,10 @@ from lapwrench.perception.evaluate import (
     evaluate_detector,
     evaluate_predictions,
     match_image,
+    read_yolo_labels,
 )
+
+W, H = 640, 480
 
 A = (100.0, 100.0, 200.0, 200.0)
 B = (300.0, 300.0, 360.0, 380.0)
@@ -111,3 +114,11 @@ def test_evaluate_detector_on_a_written_split(tmp_path):
     assert r.map50 == pytest.approx(1.0) and r.recall == 1.0 and r.ms_per_frame is not None
     with pytest.raises(FileNotFoundError, match="no such split"):
         evaluate_detector(d, tmp_path, "val")
+
+
+def test_read_labels_rejects_malformed(tmp_path):
+    p = tmp_path / "x.txt"
+    p.write_text("0 0.5 0.5 0.1\n")
+    with pytest.raises(ValueError, match="expected 'class cx cy w h'"):
+        read_yolo_labels(p, (W, H))
+    assert read_yolo_labels(tmp_path / "missing.txt", (W, H))[0].shape == (0, 4)

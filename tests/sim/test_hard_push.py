@@ -19,7 +19,6 @@ from lapwrench.config import load
 from lapwrench.sim import demo as demo_mod
 from lapwrench.sim import hard_push as hp
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions
-from lapwrench.sim.surgeon import SpeedDrivenHand
 
 pytestmark = pytest.mark.slow  # the hard-push runs in the MuJoCo world
 
@@ -47,22 +46,6 @@ def test_the_full_set_covers_the_issue() -> None:
     assert len(hp.ci_cases()) == 4
     assert SIM_SECONDS["hard-push"] == pytest.approx(hp.total_sim_seconds())
     assert "hard-push" in SCENARIOS
-
-
-def test_speed_driven_hand_is_capped_and_rate_limited(world) -> None:
-    _, R_E = world.frame_pose("lap_E")
-    hand = SpeedDrivenHand(R_E[:, 0], speed=1.0, grip_force=30.0)
-    forces = []
-    for k in range(100):  # the world is not stepped: the shaft does not move, the hand pushes harder
-        assert hand.apply(world, k * 1e-3, 1e-3) == 30.0
-        forces.append(np.linalg.norm(world.hand_force()))
-    assert forces[0] == pytest.approx(0.6)  # 600 N/s
-    assert max(forces) == pytest.approx(30.0)
-    _, d = world.shaft_axis()
-    assert abs(world.hand_force() @ d) < 1e-9  # perpendicular to the shaft
-    hand.engaged = False
-    grips = [hand.apply(world, 0.1 + k * 1e-3, 1e-3) for k in range(60)]
-    assert grips[0] == 30.0 and grips[-1] == 0.0  # lets the push fall, then lets go
 
 
 @pytest.mark.parametrize("case", [c for c in hp.default_cases() if c.kind != "speed" and c.magnitude != 20.0])

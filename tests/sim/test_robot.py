@@ -15,6 +15,7 @@ import pinocchio as pin
 import pytest
 
 from lapwrench.robot.model import RobotModel
+from lapwrench.robot_interface import RobotInterface
 from lapwrench.sim.loop import TORQUE_BIAS, TORQUE_NOISE
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 from lapwrench.sim.scene.build import Scene
@@ -108,3 +109,18 @@ def test_reading_uses_the_observer_on_the_measured_torques(panda_scene: Scene) -
         f_ref = ref.update_reference(r.q, r.dq, robot.tau_J, CONTROL_DT)
         np.testing.assert_allclose(r.external_force, f_ref, rtol=0, atol=1e-9)
     assert np.linalg.norm(f_ref) > 2.0
+
+
+def test_sim_robot_estimates_the_hand_force_from_joint_torques(world: SimWorld) -> None:
+    robot = SimRobot(world, hand_force_H=lambda t: np.array([5.0, 0.0, 0.0]) if t > 0.1 else np.zeros(3))
+    assert isinstance(robot, RobotInterface)
+    r = robot.connect()
+    assert np.linalg.norm(r.external_force) < 0.5
+    for _ in range(400):
+        r = robot.read()
+        robot.command(r.q * 0 + world.q_ref)
+    truth = world.hand_force() + world.contact_force()
+    assert np.linalg.norm(r.external_force - truth) < 0.5
+    biased = SimRobot(world, estimate=ForceEstimateConfig(torque_bias=0.5, torque_noise=0.05, seed=1))
+    r2 = biased.connect()
+    assert np.linalg.norm(r2.external_force - truth) > 0.1  # a torque bias shows up as a force

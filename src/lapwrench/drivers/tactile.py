@@ -242,6 +242,11 @@ class TactileFrameParser:
             buf.clear()
         return frames, errors
 
+    @property
+    def pending(self) -> int:
+        """Bytes held back awaiting the rest of a frame (or of a header split across reads)."""
+        return len(self._buf)
+
     def reset(self) -> None:
         """Drop buffered bytes (counters are kept)."""
         self._buf.clear()

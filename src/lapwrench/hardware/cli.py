@@ -52,12 +52,15 @@ from pathlib import Path
 from typing import Any
 
 from lapwrench.cli_types import (
+    FOXGLOVE_DEFAULT,
     ArgumentParser,
     cpu_list,
     float_in,
     hex_bytes,
     host_address,
+    host_port,
     int_in,
+    listen_problem,
     nonnegative_int,
     output_file,
     positive_float,
@@ -75,8 +78,8 @@ from lapwrench.hardware.devices import (
 )
 from lapwrench.hardware.franka import probe_command_port
 from lapwrench.hardware.log import add_log_report_arguments, log_report_main
-from lapwrench.hardware.run_inprocess import _run_in_process
-from lapwrench.hardware.run_rt import _run_process
+from lapwrench.hardware.run_inprocess import run_in_process
+from lapwrench.hardware.run_rt import run_process
 
 __all__ = [
     "CliError",
@@ -95,6 +98,10 @@ __all__ = [
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``lapwrench run`` (each value checked as it is parsed: :mod:`lapwrench.cli_types`)."""
     parser.add_argument("--robot-ip", type=host_address, help="Franka address (required unless --dry-run)")
+    parser.add_argument(
+        "--robot", metavar="NAME", default=None,
+        help="the arm: panda or fr3 (default: the config's robot.kind; --frankysim is an fr3)",
+    )
     parser.add_argument("--ft", help="handle F/T sensor: hex://HOST[:PORT] (OnRobot HEX) or ati://HOST[:PORT]")
     parser.add_argument("--tactile", help="tactile array serial port, e.g. /dev/ttyUSB0 (or a pyserial URL)")
     parser.add_argument(
@@ -124,6 +131,10 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
         "--duration", type=positive_float, default=None, help="seconds of robot time (default: until Ctrl-C)"
     )
     parser.add_argument("--log", type=output_file, help="record the run to this MCAP file")
+    parser.add_argument(
+        "--foxglove", nargs="?", const=host_port(FOXGLOVE_DEFAULT), type=host_port, default=None, metavar="HOST:PORT",
+        help=f"serve the run live to Foxglove over a WebSocket (default {FOXGLOVE_DEFAULT}): the log's channels",
+    )
     parser.add_argument("--dry-run", action="store_true", help="the full pipeline on the simulated robot")
     parser.add_argument("--realtime", choices=["enforce", "ignore"], default="enforce", help="libfranka realtime")
     parser.add_argument(
@@ -202,6 +213,12 @@ def run_main(args: argparse.Namespace) -> int:
         print(f"lapwrench run: {exc}", file=sys.stderr)
         return 2
     frankysim = bool(getattr(args, "frankysim", False))
+    problem = _robot_problem(getattr(args, "robot", None), cfg)
+    if problem:
+        print(f"lapwrench run: {problem}", file=sys.stderr)
+        return 2
+    if getattr(args, "robot", None):
+        cfg = cfg.replace(robot={"kind": args.robot})
     if frankysim:
         cfg = cfg.replace(robot={"kind": "fr3"})
     try:
@@ -213,8 +230,22 @@ def run_main(args: argparse.Namespace) -> int:
         if frankysim:
             print("lapwrench run: --frankysim runs in the process path only", file=sys.stderr)
             return 2
-        return _run_in_process(args, cfg)
-    return _run_process(args, cfg)
+        return run_in_process(args, cfg)
+    return run_process(args, cfg)
+
+
+def _robot_problem(robot: str | None, cfg: Any) -> str | None:
+    """Why ``run`` cannot drive ``robot`` (default: the config's arm), in one line, or ``None``. Only the
+    arms whose spec has a hardware driver run here (the Franka arms); the others are simulation only."""
+    from lapwrench.robot.arms import ARM_SPECS
+    from lapwrench.robot_kinds import unknown_kind_message
+
+    kind = robot or cfg.robot.kind
+    if kind not in ARM_SPECS:
+        return f"--robot {unknown_kind_message(kind)}"
+    if not ARM_SPECS[kind].hardware:
+        return f"{kind} has no hardware driver in lapwrench; simulation only (lapwrench demo --robot {kind})"
+    return None
 
 
 def _check_run_arguments(args: argparse.Namespace, cfg: Any, *, simulated: bool) -> None:
@@ -240,16 +271,39 @@ def _check_run_arguments(args: argparse.Namespace, cfg: Any, *, simulated: bool)
         )
     if args.ft:
         parse_ft_url(args.ft)
+    _check_cues(cfg)
     _check_detector(args)
     args.tactile_frame_format = tactile_format(args, cfg)
     if args.log:
         problem = writable_file_problem(args.log)
         if problem:
             raise CliError(f"--log {quote(args.log)} {problem}")
+    if getattr(args, "foxglove", None):
+        problem = listen_problem(*args.foxglove)
+        if problem:
+            raise CliError(f"--foxglove {problem}")
     if not simulated:
         problem = probe_command_port(args.robot_ip)
         if problem:
             raise CliError(f"--robot-ip {problem}")
+
+
+def _check_cues(cfg: Any) -> None:
+    """The configured cues build, and none needs a registered input: the robot path has sources for the
+    F/T sensor, the tactile array and the camera only (registered inputs run in simulation)."""
+    from lapwrench.config_ranges import ConfigError
+    from lapwrench.wrenches.registry import build_cues, input_specs
+
+    try:
+        cues = build_cues(cfg)
+        specs = input_specs(cues)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from exc
+    for cue in cues:
+        needs = [name for name in cue.inputs if name in specs]
+        if needs:
+            raise CliError(f"cue {cue.name!r} needs input {needs[0]!r}, which has no source on the robot yet "
+                           "(registered inputs run in simulation: lapwrench demo); switch the cue off in 'cues:'")
 
 
 def _check_detector(args: argparse.Namespace) -> None:

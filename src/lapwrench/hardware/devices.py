@@ -116,7 +116,7 @@ class DryRunScript:
         return np.full(64, self.grip_value if on else 0, dtype=np.uint8)
 
 
-class _TactileWriter:
+class TactileWriter:
     """Writes tactile frames of a script to a pty master at ``rate_hz`` (the simulated grip array)."""
 
     def __init__(
@@ -131,7 +131,7 @@ class _TactileWriter:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="lapwrench-sim-tactile", daemon=True)
 
-    def start(self) -> _TactileWriter:
+    def start(self) -> TactileWriter:
         self._thread.start()
         return self
 
@@ -147,7 +147,7 @@ class _TactileWriter:
 
 
 # -- opened devices ---------------------------------------------------------------------------------
-class _Devices:
+class Devices:
     """Opened devices, closed in reverse order."""
 
     def __init__(self) -> None:
@@ -162,8 +162,8 @@ class _Devices:
                 self._closers.pop()()
 
 
-def _open_sources(
-    args: argparse.Namespace, cfg: Any, devices: _Devices, script: DryRunScript | None
+def open_sources(
+    args: argparse.Namespace, cfg: Any, devices: Devices, script: DryRunScript | None
 ) -> tuple[Any, dict[str, str]]:
     """Open, check and start every sensor source; return (Sources, device descriptions).
 
@@ -188,7 +188,7 @@ def _open_sources(
         ft_url = f"hex://127.0.0.1:{fake.port}"
         master, slave = os.openpty()
         devices.add(lambda: (os.close(master), os.close(slave)))
-        writer = _TactileWriter(master, script.tactile, fmt=fmt).start()
+        writer = TactileWriter(master, script.tactile, fmt=fmt).start()
         devices.add(writer.stop)
         tactile_port = os.ttyname(slave)
     try:
@@ -320,7 +320,7 @@ class SimulatedHexProcess:
 
 
 def _simulated_devices(
-    devices: _Devices, script: DryRunScript, fmt: Any = None
+    devices: Devices, script: DryRunScript, fmt: Any = None
 ) -> tuple[str, str, SimulatedHexProcess]:
     """The dry run's F/T box (loopback UDP, own process) and tactile array (a pty) writing frames of
     ``fmt`` (default: the driver's default format; pass the reader's format)."""
@@ -328,6 +328,6 @@ def _simulated_devices(
     devices.add(fake.close)
     master, slave = os.openpty()
     devices.add(lambda: (os.close(master), os.close(slave)))
-    writer = _TactileWriter(master, script.tactile, fmt=fmt).start()
+    writer = TactileWriter(master, script.tactile, fmt=fmt).start()
     devices.add(writer.stop)
     return f"hex://127.0.0.1:{fake.port}", os.ttyname(slave), fake

@@ -179,8 +179,9 @@ class FrankaRobot:
         joint_impedance: tuple[float, ...] | None = None,
         dt: float = 0.001,
     ) -> None:
-        if kind not in ("panda", "fr3"):
-            raise ValueError(f"robot kind must be 'panda' or 'fr3', got {kind!r}")
+        if kind not in ARM_SPECS or not ARM_SPECS[kind].hardware:  # the arms this driver serves
+            franka = [k for k, s in ARM_SPECS.items() if s.hardware]
+            raise ValueError(f"robot kind must be one of {franka} (a Franka arm), got {kind!r}")
         if realtime not in ("enforce", "ignore"):
             raise ValueError(f"realtime must be 'enforce' or 'ignore', got {realtime!r}")
         if ext_wrench_sign not in ("robot_on_environment", "environment_on_robot"):

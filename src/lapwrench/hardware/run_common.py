@@ -190,3 +190,25 @@ def print_summary(summary: dict[str, Any]) -> None:
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
             os.close(devnull)
+
+
+def open_logger(args: argparse.Namespace, cfg: Any, meta: dict[str, Any]) -> Any:
+    """The run's :class:`~lapwrench.hardware.log.RunLogger` for ``--log`` and/or ``--foxglove`` (None
+    without either): with the robot model, so the file and the live view get the transforms, the
+    scope pose and the wrench arrows. A live server that cannot start is a :class:`CliError`."""
+    if not args.log and not getattr(args, "foxglove", None):
+        return None
+    from lapwrench.hardware.log import RunLogger
+    from lapwrench.hardware.log.live import LiveError
+    from lapwrench.robot.description import ScopeGeometry
+    from lapwrench.robot.model import RobotModel
+
+    model = RobotModel(cfg.robot.kind, ScopeGeometry.from_config(cfg.scope))
+    try:
+        logger = RunLogger(args.log, meta, model=model, live=getattr(args, "foxglove", None))
+    except LiveError as exc:
+        raise CliError(f"--foxglove {exc}") from exc
+    if logger.live is not None:
+        host, port = logger.live.address
+        print(f"lapwrench run: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
+    return logger

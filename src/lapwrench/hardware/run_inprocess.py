@@ -9,11 +9,18 @@ import sys
 import time
 from typing import Any
 
-from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _open_sources
-from lapwrench.hardware.run_common import StopSignals, _error_exit, print_summary, run_signalled, stop_reason
+from lapwrench.hardware.devices import CliError, Devices, DryRunScript, open_sources
+from lapwrench.hardware.run_common import (
+    StopSignals,
+    _error_exit,
+    open_logger,
+    print_summary,
+    run_signalled,
+    stop_reason,
+)
 
 
-def _run_in_process(args: argparse.Namespace, cfg: Any) -> int:
+def run_in_process(args: argparse.Namespace, cfg: Any) -> int:
     """The former single-process loop (``--in-process``): sensor and detector threads share the GIL.
     SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
     return run_signalled(_run_in_process_signalled, args, cfg)
@@ -23,28 +30,26 @@ def _run_in_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopS
     from lapwrench import config as config_mod
     from lapwrench.robot.errors import RobotError
 
-    devices = _Devices()
+    devices = Devices()
     logger = None
     # the script's clock starts when the loop does (as in the process path): until then the handle
     # is untouched (F/T tare), and a slow start-up does not play the pushes to nobody
     script = DryRunScript(t0=math.inf) if args.dry_run else None
     try:
-        sources, described = _open_sources(args, cfg, devices, script)
+        sources, described = open_sources(args, cfg, devices, script)
         loop, robot_desc = _build_loop(args, cfg, sources, script)
-        if args.log:
-            from lapwrench.hardware.log import RunLogger
-
-            logger = RunLogger(
-                args.log,
-                {
-                    "argv": sys.argv,
-                    "robot": robot_desc,
-                    "devices": described,
-                    "dry_run": bool(args.dry_run),
-                    "process": "in-process",
-                    "config": config_mod.to_dict(cfg),
-                },
-            )
+        logger = open_logger(
+            args, cfg,
+            {
+                "argv": sys.argv,
+                "robot": robot_desc,
+                "devices": described,
+                "dry_run": bool(args.dry_run),
+                "process": "in-process",
+                "config": config_mod.to_dict(cfg),
+            },
+        )
+        if logger is not None:
             loop.logger = logger
         stop = signals.arm()  # from here on a signal asks for the stop to rest
         loop.start()

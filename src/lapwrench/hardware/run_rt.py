@@ -12,11 +12,18 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from lapwrench.hardware.devices import CliError, DryRunScript, _Devices, _simulated_devices, parse_camera, parse_ft_url
-from lapwrench.hardware.run_common import StopSignals, _error_exit, print_summary, run_signalled, stop_reason
+from lapwrench.hardware.devices import CliError, Devices, DryRunScript, _simulated_devices, parse_camera, parse_ft_url
+from lapwrench.hardware.run_common import (
+    StopSignals,
+    _error_exit,
+    open_logger,
+    print_summary,
+    run_signalled,
+    stop_reason,
+)
 
 
-def _run_process(args: argparse.Namespace, cfg: Any) -> int:
+def run_process(args: argparse.Namespace, cfg: Any) -> int:
     """The loop in its own process, the detector in another; this one feeds, logs and waits.
     SIGINT, SIGTERM and SIGHUP: see :mod:`lapwrench.hardware.run_common`."""
     return run_signalled(_run_process_signalled, args, cfg)
@@ -32,7 +39,7 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
 
     frankysim = bool(getattr(args, "frankysim", False))
     simulated = bool(args.dry_run or frankysim)
-    devices = _Devices()
+    devices = Devices()
     logger = None
     # the script's clock starts when the loop does: until then the handle is untouched (F/T tare)
     script = DryRunScript(t0=math.inf) if simulated else None
@@ -86,7 +93,7 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
             tactile=tactile is not None,
             instruments=args.camera is not None,
             duration=args.duration,
-            log_cycles=bool(args.log),
+            log_cycles=bool(args.log or args.foxglove),
             rt=RtOptions(fifo_priority=args.rt_priority or None, cpus=_cpus(args.rt_cpus), warn=False),  # printed below
             feeder_timeout=args.feeder_timeout,
             detector_timeout=args.detector_timeout,
@@ -101,21 +108,19 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
         described.update(ready.get("devices", {}))
         for problem in ready.get("rt_problems", []):
             print(f"lapwrench run: warning: {problem}", file=sys.stderr)
-        if args.log:
-            from lapwrench.hardware.log import RunLogger
-
-            logger = RunLogger(
-                args.log,
-                {
-                    "argv": sys.argv,
-                    "robot": ready.get("robot"),
-                    "devices": described,
-                    "dry_run": simulated,
-                    "frankysim": frankysim,
-                    "process": "rt",
-                    "config": config_mod.to_dict(cfg),
-                },
-            )
+        logger = open_logger(
+            args, cfg,
+            {
+                "argv": sys.argv,
+                "robot": ready.get("robot"),
+                "devices": described,
+                "dry_run": simulated,
+                "frankysim": frankysim,
+                "process": "rt",
+                "config": config_mod.to_dict(cfg),
+            },
+        )
+        if logger is not None:
             rp.set_logger(logger)
         stop = signals.arm()  # from here on a signal asks for the stop to rest
         print(f"lapwrench run: {ready.get('robot')} ready; devices: {described or 'none'}", file=sys.stderr)
@@ -167,7 +172,7 @@ def _robot_factory(args: argparse.Namespace, cfg: Any, simulated: bool) -> Calla
 
 
 def _start_camera_and_detector(
-    args: argparse.Namespace, cfg: Any, devices: _Devices, rp: Any, described: dict[str, str]
+    args: argparse.Namespace, cfg: Any, devices: Devices, rp: Any, described: dict[str, str]
 ) -> None:
     """The camera here, its detector in its own process writing into the loop's bus."""
     from lapwrench.drivers import DeviceError

@@ -29,7 +29,8 @@ import numpy as np
 from lapwrench import loop
 from lapwrench.buffer import LatestValue
 from lapwrench.controller import Controller
-from lapwrench.hardware.log import CycleRecord, RunLogger
+from lapwrench.hardware.log import RunLogger
+from lapwrench.hardware.log.record import cycle_record
 from lapwrench.loop_stats import Cycle, LoopStats
 from lapwrench.robot_interface import RobotInterface
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent
@@ -188,38 +189,8 @@ class ControlLoop(loop.ControlLoop):
     def _log(self, c: Cycle) -> None:
         if self.logger is None:
             return
-        r, frame, reading = c.result, c.frame, c.reading
-        if r is not None:
-            ft, ta, ins = frame.ft, frame.tactile, frame.instruments
-            self.logger.cycle(
-                CycleRecord(
-                    t=frame.time,
-                    robot_time=reading.stamp,
-                    k=c.k,
-                    q=reading.q,
-                    dq=reading.dq,
-                    tau_J=getattr(self.robot, "tau_J", None),
-                    external_force=reading.external_force,
-                    ft_force=None if ft is None else ft.force,
-                    ft_torque=None if ft is None else ft.torque,
-                    tactile=None if ta is None else ta.values,
-                    instruments=None if ins is None else ins.points,
-                    wrenches=r.wrenches,
-                    mode=r.mode,
-                    delta=r.delta,
-                    contacts=r.contacts,
-                    p_R=r.p_R,
-                    p_G=r.p_G,
-                    e_R=r.e_R,
-                    rcm_error=r.rcm_error,
-                    rcm_error_measured=c.scope.rcm_error,
-                    q_ref=r.q_ref,
-                    q_cmd=c.q_cmd,
-                    supervisor=self.supervisor.state.value,
-                    alarm=self.supervisor.alarm,
-                    compute_us=c.compute * 1e6,
-                    cycle_us=c.period * 1e6,
-                )
-            )
+        rec = cycle_record(c, self.supervisor.state.value, self.supervisor.alarm, getattr(self.robot, "tau_J", None))
+        if rec is not None:
+            self.logger.cycle(rec)
         self._log_events(c.events)
 

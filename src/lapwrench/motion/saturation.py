@@ -11,7 +11,7 @@ lower-priority motion, closest to a_d in the kinetic metric:
 This is the problem Saturation in the Null Space (SNS; Flacco, De Luca, Khatib, IEEE T-RO 2015)
 solves greedily, by saturating the most violated joint at its bound until the rest fits. Greedy
 saturation can miss a solution that exists: on 40 random states with random null-space demands it
-found none in 16 cases where one did (tests/core/test_saturation.py keeps those cases). So the
+found none in 16 cases where one did (tests/motion/test_saturation.py keeps those cases). So the
 problem is solved exactly, as a small hierarchical QP, with the Goldfarb-Idnani dual active-set
 method (compiled, :mod:`lapwrench.motion.qp`, a few µs for 7 joints; ``quadprog`` for the rarer
 levels below and as the fallback when round-off defeats the compiled solver):
@@ -75,10 +75,6 @@ class LimitRows:
         n = a_lo.shape[0]
         eye, names, hard = _box_constants(n)
         return LimitRows(eye, a_lo, a_hi, a_max, names, hard)
-
-    def through(self, J: Mat) -> LimitRows:
-        """Rows on x mapped to rows on a through x = J a (e.g. twist rows through J_E)."""
-        return LimitRows(self.C @ J, self.lo, self.hi, self.scale, self.names, self.hard)
 
     def admits(self, x: Vec) -> bool:
         """True if x meets every row (up to the round-off tolerance)."""

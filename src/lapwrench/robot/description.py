@@ -1,12 +1,13 @@
 """The robot description shared by the controller (Pinocchio) and the simulator (MuJoCo).
 
-The arm URDF comes from a packaged robot description (``example-robot-data`` for the Panda,
-``franky-sim`` for the FR3). The gripper is removed and a laparoscope is rigidly mounted on the
-flange as extra URDF links, so that Pinocchio and MuJoCo load the *same* text.
+The arm URDF comes from a packaged robot description, named by the arm's spec
+(:mod:`lapwrench.robot.arms`: ``example-robot-data`` for the Panda, UR5 and xArm7, ``franky-sim`` for
+the FR3). The gripper is removed and a laparoscope is rigidly mounted on the flange as extra URDF
+links, so that Pinocchio and MuJoCo load the *same* text.
 
 Frames (paper Sec. II-B). All are parallel to {E} by default:
 
-- ``lap_E``: end-effector {E}, the flange, where the scope is mounted; +z runs along the shaft.
+- ``lap_E``: end-effector {E}, on the flange at the spec's scope mount; +z runs along the shaft.
 - ``lap_H``: handle {H}, where the F/T sensor sits, ``handle_offset`` along +z from {E}.
 - ``lap_C``: camera {C} at the scope tip, ``L`` along +z. With an oblique scope it is rotated
   about x_E by ``oblique_angle_deg`` (the paper's convention is the parallel frame).
@@ -15,82 +16,27 @@ Frames (paper Sec. II-B). All are parallel to {E} by default:
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 from lapwrench.config import ScopeConfig
+from lapwrench.robot.arms import ARM_SPECS, MAX_JOINTS, ArmSpec, RobotDescriptionError, arm_spec
+from lapwrench.robot_kinds import ROBOT_KINDS
 
-RobotKind = Literal["panda", "fr3"]
-ROBOT_KINDS: tuple[RobotKind, ...] = ("panda", "fr3")
+RobotKind = str
+"""A registered arm's name (:data:`~lapwrench.robot_kinds.ROBOT_KINDS`); checked against the registry."""
 
 FRAME_E = "lap_E"
 FRAME_H = "lap_H"
 FRAME_C = "lap_C"
 FRAME_TIP = "lap_tip"
 
-
-class RobotDescriptionError(RuntimeError):
-    """The robot description could not be found or parsed."""
-
-
-@dataclass(frozen=True)
-class ArmSpec:
-    """One arm as data: its joint names (their count is the length of every per-joint vector), the
-    links that differ between descriptions, and its start poses (rad, one value per joint).
-
-    ``home_pose`` is the controller's default start (scope pointing straight down, comfortably
-    inside the limits: the virtual closed loop, the real-time warm-up, franky-sim's start);
-    ``sim_start_pose`` the simulated scene's (flange 0.482 m above the base, 0.5 m in front, scope
-    straight down, at least 0.9 rad from every joint limit). ``servo_stiffness`` (N m/rad) and
-    ``servo_damping`` (N m s/rad) are the simulated joint position servo's gains: libfranka's default
-    joint impedance, and about critical damping with the arm's inertia plus armature near the start pose.
-    ``sim_torque_bias`` (N m) is the constant offset the simulation puts on the measured joint torques
-    behind the external force estimate (a Franka-like torque sensing imperfection).
-    """
-
-    joint_names: tuple[str, ...]
-    flange_link: str
-    base_link: str
-    home_pose: tuple[float, ...]
-    sim_start_pose: tuple[float, ...]
-    servo_stiffness: tuple[float, ...]
-    servo_damping: tuple[float, ...]
-    sim_torque_bias: tuple[float, ...]
-
-    def __post_init__(self) -> None:
-        for name in ("home_pose", "sim_start_pose", "servo_stiffness", "servo_damping", "sim_torque_bias"):
-            if len(getattr(self, name)) != len(self.joint_names):
-                raise ValueError(f"{name} needs one value per joint ({len(self.joint_names)})")
-
-    @property
-    def n_joints(self) -> int:
-        """The arm's joint count (the length of every per-joint vector: q, dq, limits, commands)."""
-        return len(self.joint_names)
-
-
-# The Panda and FR3 share their kinematics, hence their start poses and simulated servo and torque sensing.
-_FRANKA_HOME = (0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785)
-_FRANKA_SIM_START = (0.0, -0.1774, 0.0, -2.1379, 0.0, 1.9606, math.pi / 4)
-_FRANKA_SIM = {
-    "servo_stiffness": (3000.0, 3000.0, 3000.0, 2500.0, 2500.0, 2000.0, 2000.0),
-    "servo_damping": (150.0, 150.0, 110.0, 100.0, 40.0, 40.0, 30.0),
-    "sim_torque_bias": (0.08, -0.1, 0.05, 0.1, -0.02, 0.03, 0.01),
-}
-
-ARM_SPECS: dict[str, ArmSpec] = {
-    "panda": ArmSpec(tuple(f"panda_joint{i}" for i in range(1, 8)), "panda_link8", "panda_link0", _FRANKA_HOME,
-                     _FRANKA_SIM_START, **_FRANKA_SIM),
-    "fr3": ArmSpec(tuple(f"joint{i}" for i in range(1, 8)), "link8", "link0", _FRANKA_HOME, _FRANKA_SIM_START,
-                   **_FRANKA_SIM),
-}
-
-MAX_JOINTS = max(spec.n_joints for spec in ARM_SPECS.values())
-"""The most joints any shipped arm has: the per-joint width of fixed-size formats (the real-time bus's
-cycle rows), which also record the actual count."""
+__all__ = [
+    "ARM_SPECS", "FRAME_C", "FRAME_E", "FRAME_H", "FRAME_TIP", "MAX_JOINTS", "ROBOT_KINDS", "ArmSpec",
+    "RobotDescriptionError", "RobotKind", "ScopeGeometry", "arm_spec", "arm_urdf_path", "build_urdf",
+]
 
 
 @dataclass(frozen=True)
@@ -126,35 +72,13 @@ class ScopeGeometry:
             raise ValueError(f"scope.oblique_angle_deg must lie in [0, 90), got {self.oblique_angle_deg!r}")
 
 
-def _panda_urdf_path() -> Path:
-    try:
-        files = importlib.metadata.files("example-robot-data") or []
-    except importlib.metadata.PackageNotFoundError as exc:
-        raise RobotDescriptionError("the Panda needs the 'example-robot-data' package") from exc
-    for f in files:
-        if str(f).endswith("panda_description/urdf/panda.urdf"):
-            return Path(str(f.locate()))
-    raise RobotDescriptionError("example-robot-data is installed but ships no panda_description/urdf/panda.urdf")
-
-
-def _fr3_urdf_path() -> Path:
-    try:
-        import franky_sim
-    except ImportError as exc:
-        raise RobotDescriptionError("the FR3 description comes with 'franky-sim': pip install franky-sim") from exc
-    path = Path(franky_sim.__file__).parent / "assets" / "fr3_clean.urdf"
-    if not path.is_file():
-        raise RobotDescriptionError(f"franky-sim ships no FR3 URDF at {path}")
-    return path
-
-
 def arm_urdf_path(kind: RobotKind) -> Path:
-    """Path of the packaged arm URDF for ``kind``."""
-    if kind == "panda":
-        return _panda_urdf_path()
-    if kind == "fr3":
-        return _fr3_urdf_path()
-    raise RobotDescriptionError(f"unknown robot {kind!r}; choose one of {ROBOT_KINDS}")
+    """Path of the packaged arm URDF for ``kind`` (its spec's ``description``)."""
+    try:
+        spec = arm_spec(kind)
+    except ValueError as exc:
+        raise RobotDescriptionError(str(exc)) from None
+    return spec.urdf_path()
 
 
 def _resolve_mesh_paths(root: ET.Element, urdf_path: Path) -> None:
@@ -243,11 +167,11 @@ def build_urdf(kind: RobotKind = "panda", scope: ScopeGeometry | None = None) ->
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise RobotDescriptionError(f"cannot parse {path}: {exc}") from exc
-    spec = ARM_SPECS[kind]
+    mount = arm_spec(kind).mount
     _resolve_mesh_paths(root, path)
-    _strip_below(root, spec.flange_link)
+    _strip_below(root, mount.link)
     L = scope.length
-    _add_link(root, FRAME_E, spec.flange_link, (0.0, 0.0, 0.0))
+    _add_link(root, FRAME_E, mount.link, mount.xyz, mount.rpy)
     _add_link(
         root, "lap_handle", FRAME_E, (0.0, 0.0, 0.0),
         mass=scope.handle_mass, radius=scope.handle_radius, length=scope.handle_length, com_z=scope.handle_offset,

@@ -1,7 +1,8 @@
-"""Franka joint limits (position, velocity, acceleration, jerk, torque, torque rate).
+"""Joint limits of an arm (position, velocity, acceleration, jerk, torque, torque rate).
 
-Velocity/acceleration/jerk/torque values are the ones libfranka enforces on real hardware
-(Franka datasheets; table in DEVELOPERS.md). Position limits come from the robot description.
+Velocity/acceleration/jerk/torque/torque-rate values are the arm's spec's tables
+(:mod:`lapwrench.robot.arms`, each with its published source: for the Franka arms, the limits
+libfranka enforces). Position limits come from the robot description.
 """
 
 from __future__ import annotations
@@ -11,25 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.description import build_urdf
 from lapwrench.spatial import Vec
-
-_TABLE: dict[str, dict[str, list[float]]] = {
-    "panda": {
-        "velocity": [2.175] * 4 + [2.61] * 3,
-        "acceleration": [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0],
-        "jerk": [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0],
-        "torque": [87.0] * 4 + [12.0] * 3,
-        "torque_rate": [1000.0] * 7,
-    },
-    "fr3": {
-        "velocity": [2.62] * 4 + [5.26, 4.18, 5.26],
-        "acceleration": [10.0] * 7,
-        "jerk": [5000.0] * 7,
-        "torque": [87.0] * 4 + [12.0] * 3,
-        "torque_rate": [1000.0] * 7,
-    },
-}
 
 
 @dataclass(frozen=True)
@@ -57,30 +42,31 @@ class JointLimits:
         )
 
 
-def franka_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
-    """The Franka limits of ``kind`` ('panda' or 'fr3'); position limits from ``model`` (by default the
-    Pinocchio model of the arm's description, as :class:`~lapwrench.robot.model.RobotModel` builds it)."""
-    if kind not in _TABLE:
-        raise ValueError(f"no limit table for robot {kind!r}; choose one of {sorted(_TABLE)}")
-    t = {k: np.array(v, dtype=float) for k, v in _TABLE[kind].items()}
+def arm_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
+    """The limits of arm ``kind`` (its spec's tables); position limits from ``model`` (by default the
+    Pinocchio model of the arm's description, as :class:`~lapwrench.robot.model.RobotModel` builds it).
+    ``ValueError`` for an arm that is not registered."""
+    t = arm_spec(kind).limits
     if model is None:
         model = pin.buildModelFromXML(build_urdf(kind))  # type: ignore[arg-type]
     return JointLimits(
         np.array(model.lowerPositionLimit, dtype=float),
         np.array(model.upperPositionLimit, dtype=float),
-        t["velocity"],
-        t["acceleration"],
-        t["jerk"],
-        t["torque"],
-        t["torque_rate"],
+        np.array(t.velocity, dtype=float),
+        np.array(t.acceleration, dtype=float),
+        np.array(t.jerk, dtype=float),
+        np.array(t.torque, dtype=float),
+        np.array(t.torque_rate, dtype=float),
     )
+
+
+franka_limits = arm_limits
+"""The former name of :func:`arm_limits` (from when only the Franka arms shipped)."""
 
 
 def joint_torque_limits(kind: str) -> Vec:
     """The joint torque limits (N m) of ``kind``, one per joint (the simulator's servo clip)."""
-    if kind not in _TABLE:
-        raise ValueError(f"no limit table for robot {kind!r}; choose one of {sorted(_TABLE)}")
-    return np.array(_TABLE[kind]["torque"], dtype=float)
+    return np.array(arm_spec(kind).limits.torque, dtype=float)
 
 
 def limit_usage(q_ref: np.ndarray, dt: float, limits: JointLimits, q_start: Vec | None = None) -> dict[str, float]:

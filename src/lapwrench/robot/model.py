@@ -13,8 +13,8 @@ import numpy as np
 import pinocchio as pin
 
 from lapwrench.jit import bind, kernel
+from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.description import (
-    ARM_SPECS,
     FRAME_C,
     FRAME_E,
     FRAME_H,
@@ -22,7 +22,7 @@ from lapwrench.robot.description import (
     ScopeGeometry,
     build_urdf,
 )
-from lapwrench.robot.limits import JointLimits, franka_limits
+from lapwrench.robot.limits import JointLimits, arm_limits
 from lapwrench.spatial import Mat, Vec
 
 
@@ -163,11 +163,12 @@ class RobotModel:
 
     def __init__(self, kind: RobotKind = "panda", scope: ScopeGeometry | None = None) -> None:
         self.kind: RobotKind = kind
+        self.spec = arm_spec(kind)  # ValueError (one line) for an arm that is not registered
         self.scope = scope or ScopeGeometry()
         self.urdf = build_urdf(kind, self.scope)
         self.model = pin.buildModelFromXML(self.urdf)
         self.data = self.model.createData()
-        n = ARM_SPECS[kind].n_joints
+        n = self.spec.n_joints
         if self.model.nq != n or self.model.nv != n:
             raise ValueError(f"expected a {n}-DoF arm, the {kind} description has nq={self.model.nq}")
         self.nq: int = self.model.nq
@@ -175,7 +176,7 @@ class RobotModel:
         self.frame_E = self.model.getFrameId(FRAME_E)
         self.frame_H = self.model.getFrameId(FRAME_H)
         self.frame_C = self.model.getFrameId(FRAME_C)
-        self.limits: JointLimits = franka_limits(kind, self.model)
+        self.limits: JointLimits = arm_limits(kind, self.model)
         self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         self._axis_data = self.model.createData()  # scope_axis_at's own workspace
         self._bind_per_tick_calls()

@@ -14,7 +14,6 @@ import gc
 import multiprocessing as mp
 import os
 import platform
-import shutil
 import signal
 import time
 import traceback
@@ -29,10 +28,11 @@ import mujoco
 
 from lapwrench import __version__
 from lapwrench import config as config_mod
+from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import report
 from lapwrench.sim.loop import SafetyStopError
 from lapwrench.sim.results import ScenarioOptions, ScenarioResult
-from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, needle_search
+from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, needle_search, scenarios_for
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError
 
 TRACKING_SCENARIOS = ("needle-search", "workflow")
@@ -55,6 +55,11 @@ class DemoPlan:
     printed_damping_check: bool
     detector: str = "shipped"
     workers: int = 1  # scenarios run on this many processes (each scenario is seeded: same results)
+    skipped: tuple[str, ...] = ()  # scenarios left out by default on this arm (tuned for the Franka)
+
+    @property
+    def robot(self) -> str:  # the arm every scenario runs on (the configs' robot.kind)
+        return next(iter(self.configs.values())).robot.kind
 
 
 def plan_demo(
@@ -68,15 +73,20 @@ def plan_demo(
     printed_damping_check: bool = True,
     detector: str = "shipped",
     workers: int | None = None,
+    robot: str | None = None,
 ) -> DemoPlan:
-    """Validate everything (names, numbers, configs, the detector's model, output folder) and return
-    the plan. Nothing is simulated, written or deleted before every check has passed."""
+    """Validate everything (names, numbers, robot, configs, the detector's model, output folder) and
+    return the plan. Nothing is simulated, written or deleted before every check has passed. ``robot``
+    (a shipped arm's name) overrides the configs' ``robot.kind``; without ``scenarios`` a simulation-only
+    arm runs all but the Franka-tuned ones (:func:`~lapwrench.sim.scenarios.scenarios_for`)."""
     if workers is None:
         workers = min(4, os.cpu_count() or 1)
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 64:
         raise DemoError(f"workers must be a whole number from 1 to 64, got {workers!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise DemoError(f"seed must be a whole number from 0 to {MAX_SEED}, got {str(seed)[:60]}")
+    if robot is not None and robot not in ROBOT_KINDS:
+        raise DemoError(f"--robot {unknown_kind_message(str(robot))}")
     names = tuple(scenarios or SCENARIOS)
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
@@ -95,8 +105,19 @@ def plan_demo(
     try:
         base = config_mod.load(config)
         tracking = config_mod.load(tracking_config or config)
+        if robot is not None:
+            base, tracking = (c.replace(robot={"kind": robot}) for c in (base, tracking))
     except config_mod.ConfigError as exc:
         raise DemoError(str(exc)) from exc
+    kind, skipped = base.robot.kind, ()
+    if tracking.robot.kind != kind:
+        raise DemoError(f"the configs name two robots ({kind}, {tracking.robot.kind}); use --robot to pick one")
+    if not scenarios:
+        names = scenarios_for(kind)
+        skipped = tuple(n for n in SCENARIOS if n not in names)
+    elif tuned := [n for n in names if n in FRANKA_TUNED and n not in scenarios_for(kind)]:
+        raise DemoError(f"scenario {', '.join(tuned)} is tuned for the Franka arms; {kind} runs "
+                        f"{', '.join(scenarios_for(kind))}")
     for c in (base, tracking):
         if c.robot.control_rate_hz != 1.0 / CONTROL_DT:
             raise DemoError(
@@ -124,6 +145,7 @@ def plan_demo(
         printed_damping_check and config is None and any(n in TRACKING_SCENARIOS for n in names),
         detector,
         workers,
+        skipped,
     )
 
 
@@ -176,7 +198,7 @@ def _task(name: str, plan: DemoPlan) -> tuple[str, ScenarioResult | str, str | N
     gc.disable()
     try:
         if name == PRINTED_DAMPING:
-            return name, _printed_damping_check(opts), None
+            return name, _printed_damping_check(opts, plan.robot), None
         return name, SCENARIOS[name](plan.configs[name], opts), None
     except (SimulationUnstableError, SafetyStopError) as exc:
         return name, "", f"simulation of '{name}' stopped: {exc}. No report was written."
@@ -308,7 +330,7 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         "python": platform.python_version(),
         "seed": plan.seed,
         "time_scale": plan.time_scale,
-        "robot": next(iter(plan.configs.values())).robot.kind,
+        "robot": plan.robot,
         "physics_dt_ms": 0.5,
         "config_sources": plan.config_sources,
         "wall_s": wall,
@@ -316,7 +338,7 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         "sim_s": sum(sum(float(r.metrics["duration_s"]) for r in res.runs) for res in results.values()),  # type: ignore[union-attr]
         "instrument_source": _instrument_sources(results),  # type: ignore[arg-type]
         "printed_damping_check": check,
-        "notes": _notes(plan),
+        "notes": report.demo_notes(plan.time_scale, plan.robot, plan.skipped),
     }
     report.write_metrics(out, results, meta)  # type: ignore[arg-type]
     report.write_report(out, results, meta, figures)  # type: ignore[arg-type]
@@ -350,10 +372,10 @@ def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) ->
     return figs
 
 
-def _printed_damping_check(opts: ScenarioOptions) -> str:
-    """Needle search with the damping table exactly as printed (one k_t for every cue, k_f = 2), to
-    show why the defaults depart from it."""
-    cfg = config_mod.load().replace(viscous={"k_f": 2.0, "k_t_unguided": 150.0})
+def _printed_damping_check(opts: ScenarioOptions, robot: str) -> str:
+    """Needle search on ``robot`` with the damping table exactly as printed (one k_t for every cue,
+    k_f = 2), to show why the defaults depart from it."""
+    cfg = config_mod.load().replace(robot={"kind": robot}, viscous={"k_f": 2.0, "k_t_unguided": 150.0})
     try:
         res = needle_search(cfg, opts)
     except SimulationUnstableError as exc:
@@ -375,26 +397,3 @@ def _printed_damping_check(opts: ScenarioOptions) -> str:
 def _instrument_sources(results: dict[str, ScenarioResult]) -> str:
     sources = [f"{name}: {r.instrument_source}" for name, r in results.items() if r.instrument_source]
     return "; ".join(sources) or "none (no tracking scenario run)"
-
-
-def _notes(plan: DemoPlan) -> list[str]:
-    return [
-        "Every scenario uses the shipped defaults: the paper's Sec. IV-A table except the damping of eq 40, "
-        "where k_t = 150 N m s acts while the handle is gripped, k_t_unguided = 2 N m s while it is not (the "
-        "tracking cue's own damping) and k_f = 150 N s/m: with the printed table a 10 N tracking force turns "
-        "the view at ~0.2 deg/s and the insertion axis is almost free (see the check below).",
-        "tracking.direction = image_plane (the text of eq 12); the printed eq 12 also retracts the scope.",
-        "The simulated surgeon: force-driven hand in grip (same effort at every grip), speed-driven hand "
-        "(0.25 rad/s, at most 25 N) in the tracking scenarios.",
-        f"Simulation time scale {plan.time_scale} (1 = the paper's durations).",
-        f"Machine: {os.cpu_count()} CPUs; MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}; ffmpeg: "
-        f"{'yes' if shutil.which('ffmpeg') or _has_imageio_ffmpeg() else 'no'}.",
-    ]
-
-
-def _has_imageio_ffmpeg() -> bool:
-    try:
-        import imageio_ffmpeg  # noqa: F401
-    except ImportError:
-        return False
-    return True

@@ -18,7 +18,7 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
-from lapwrench.robot.description import ARM_SPECS
+from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
@@ -31,7 +31,8 @@ from lapwrench.sim.sensors import (
     TactileGripModel,
 )
 from lapwrench.sim.world import CONTROL_DT, SimWorld
-from lapwrench.sources import Observable, Source
+from lapwrench.sources import Observable, Source, simulated_input
+from lapwrench.wrenches.registry import input_specs
 
 # Modelled capture-to-use delay of a detection (s): one frame period at 25 fps. The shipped model's
 # inference (two passes) is 9 ms in bench/detect.py and about 17 ms inside the simulated loop
@@ -40,9 +41,9 @@ DETECTION_LATENCY = 0.04
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
 
 # Franka-like joint torque sensing imperfections behind the external force estimate: white noise, and
-# a constant bias per joint from the robot's spec (TORQUE_BIAS: the Panda's).
+# a constant bias per joint from the robot's spec (ClosedLoop uses its arm's; TORQUE_BIAS is the Panda's).
 TORQUE_NOISE = 0.05  # N m, white
-TORQUE_BIAS = ARM_SPECS["panda"].sim_torque_bias  # N m
+TORQUE_BIAS = arm_spec("panda").sim_torque_bias  # N m
 
 
 class SafetyStopError(RuntimeError):
@@ -107,6 +108,9 @@ def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, st
     return perception.make_detector(spec, det_cfg), f"detector {spec} on the rendered frames"
 
 
+_ZERO_WRENCH = np.zeros(6)  # a paper cue the configuration switched off
+
+
 @dataclass
 class Trace:
     """Per-tick records of one run (lists while running, arrays after :meth:`finish`)."""
@@ -150,7 +154,7 @@ class ClosedLoop:
         s_ft, s_tac, s_obs = (int(x.generate_state(1)[0]) for x in rng.spawn(3))
         self.ft = SimForceTorqueSensor(self.world, seed=s_ft)
         self.tactile = TactileGripModel(seed=s_tac)
-        bias = ARM_SPECS[sc.kind].sim_torque_bias
+        bias = arm_spec(sc.kind).sim_torque_bias
         self.robot = SimRobot(
             self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=bias, seed=s_obs)
         )
@@ -190,6 +194,8 @@ class ClosedLoop:
         if self.detection is not None:
             out.append(Observable("instruments", self._observation, update_interval=CONTROL_DT,
                                   max_age=ages.max_image_age))
+        for i, spec in enumerate(input_specs(self.controller.cues).values()):  # inputs the plugin cues ask for
+            out.append(simulated_input(spec, self.world, seed=self.seed + i))
         return out
 
     @property
@@ -269,8 +275,16 @@ class ClosedLoop:
         return self.world.axis_offset(self.world.incision_rest_position())[0]
 
     def record(self, trace: Trace, res: TickResult, **extra: object) -> None:
+        """One row of ``trace``: the run's state, and every cue's wrench (``cue:<name>``, 6-vector) and
+        telemetry (``cue:<name>.<field>``), whatever cues the configuration runs."""
         w = self.world
         p_E, d_z = w.shaft_axis()
+        cues: dict[str, object] = {f"cue:{name}": v for name, v in res.wrenches.items()}
+        for cue in self.controller.python_cues:
+            values = (res.telemetry or {}).get(cue.name, ())
+            for field_name, x in zip(cue.telemetry_fields, values, strict=False):
+                cues[f"cue:{cue.name}.{field_name}"] = x
+        trace.add(**cues)
         trace.add(
             t=res.time,
             mode=res.mode,
@@ -278,8 +292,8 @@ class ClosedLoop:
             rcm_error_ctrl=res.rcm_error,
             rcm_error_phys=self.physical_rcm_error(),
             contact_force=w.contact_force(),
-            W_h=res.wrenches["interaction"],
-            W_c=res.wrenches["tracking"],
+            W_h=res.wrenches.get("interaction", _ZERO_WRENCH),
+            W_c=res.wrenches.get("tracking", _ZERO_WRENCH),
             p_R=res.p_R,
             incision=w.incision_position(),
             p_E=p_E,

@@ -21,6 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from lapwrench.config import Config
+from lapwrench.robot.arms import arm_spec
 from lapwrench.sim.hard_push import hard_push as run_hard_push
 from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, run_metrics
@@ -316,6 +317,16 @@ SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
     "workflow": workflow,
     "hard-push": hard_push,
 }
+FRANKA_TUNED = ("hard-push",)
+"""Scenarios whose pushes and targets are tuned for the Franka arms: left out on the simulation-only arms."""
+
+
+def scenarios_for(kind: str) -> tuple[str, ...]:
+    """The scenarios a demo on arm ``kind`` runs by default: every one on an arm with a hardware driver
+    (the Franka arms), all but :data:`FRANKA_TUNED` on the simulation-only ones (ur5, xarm7)."""
+    return tuple(n for n in SCENARIOS if arm_spec(kind).hardware or n not in FRANKA_TUNED)
+
+
 # hard-push: 28 runs of 1.5 s push + 1 s settling (lapwrench.sim.hard_push.total_sim_seconds())
 SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0, "hard-push": 70.0}
 

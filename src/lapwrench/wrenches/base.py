@@ -1,45 +1,99 @@
-"""The one small interface every wrench source implements.
+"""The one interface every cue implements: :class:`Cue`.
 
-A source reads the tick's :class:`TickContext` (kinematics, RCM/closest-point geometry and the
+A cue reads the tick's :class:`TickContext` (kinematics, the RCM and closest-point geometry, the
 validated sensor inputs) and returns a :class:`~lapwrench.spatial.Wrench` in {B} about a point of
-its choice. The allocator moves it to the closest point with eq (39). To add a cue, write a class
-with a ``name`` and a ``compute(ctx) -> Wrench`` method and pass it to the controller as an extra
-null-space source.
+its choice. Null-space cues (the default) are moved to the closest point p_G with eq (39) and act
+through J_G in the null space of the RCM task (eq 3-4, 37-38); task-space cues add their force to
+the RCM force at p_R and act through J_R with the task's priority (eq 2).
+
+To add a cue, write one class and register it (see :mod:`lapwrench.plugins`)::
+
+    @dataclass(frozen=True)
+    class Params:                      # validated from cues.<name> in the YAML
+        stiffness: float = ranged("(0, 1000]", 50.0, "N/m")
+
+    class Spring(Cue):
+        Params = Params
+        def compute(self, ctx):
+            return Wrench(np.zeros(3), -self.params.stiffness * ctx.kin.p_C, ctx.kin.p_C)
+
+    # pyproject.toml:  [project.entry-points."lapwrench.cues"]  spring = "mypkg:Spring"
+    # config:          cues: {spring: {stiffness: 80}}
+
+Its wrench then appears under its name in :attr:`TickResult.wrenches
+<lapwrench.controller.TickResult.wrenches>`, the logs, the demo's traces and plots, and the live
+telemetry, with no further code.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, ClassVar, Literal
 
+from lapwrench.config import Config
 from lapwrench.rcm.geometry import TaskGeometry
 from lapwrench.robot.model import Kinematics
 from lapwrench.sensors import ValidInputs
 from lapwrench.spatial import Mat, Wrench
 
+Priority = Literal["task", "null"]
+
 
 @dataclass(frozen=True)
 class TickContext:
+    """What a cue reads: the tick's time (s), the kinematics at the reference, the task geometry
+    (eq 27-36) and the inputs that passed validation (``inputs.extra`` holds registered inputs)."""
+
     time: float
     kin: Kinematics
     geometry: TaskGeometry
     inputs: ValidInputs
 
 
-@runtime_checkable
-class WrenchSource(Protocol):
-    """A cue turned into an equivalent wrench."""
+class Cue:
+    """A cue turned into an equivalent wrench (the plugin interface; module docstring).
 
-    name: str
+    Class attributes describe the kind of cue:
 
-    def compute(self, ctx: TickContext) -> Wrench: ...
-
-
-@runtime_checkable
-class DampingSource(Protocol):
-    """A source whose wrench is linear in the closest-point twist: W = -D J_G θ̇.
-
-    The semi-implicit integrator treats such terms implicitly.
+    - ``priority``: ``"null"`` (default) acts in the null space of the RCM task through the
+      closest-point Jacobian; ``"task"`` adds its force at p_R to the RCM task (only its part
+      lateral to the shaft acts).
+    - ``inputs``: the readings it needs, by name: ``"ft"``, ``"tactile"``, ``"instruments"`` or a
+      registered input (:data:`lapwrench.plugins.INPUT_GROUP`). A missing or stale input reaches
+      ``compute`` as None; the cue must then return a zero wrench.
+    - ``Params``: a frozen dataclass of :func:`~lapwrench.config_ranges.ranged` fields, built and
+      range-checked from the cue's entry in the ``cues:`` section (None: no parameters).
+    - ``config_section``: the paper's cues read their parameters from their own section of the
+      configuration (``tracking:``, ...) instead.
+    - ``fused``: computed inside the compiled tick (the paper's four cues): ``compute`` is then the
+      reference the compiled tick is tested against, not what runs at 1 kHz.
+    - ``telemetry_fields``: names of the numbers :meth:`telemetry` returns each tick.
     """
 
-    def damping_matrix(self) -> Mat: ...
+    priority: ClassVar[Priority] = "null"
+    inputs: ClassVar[tuple[str, ...]] = ()
+    Params: ClassVar[type | None] = None
+    config_section: ClassVar[str | None] = None
+    fused: ClassVar[bool] = False
+    telemetry_fields: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, name: str, params: Any, cfg: Config) -> None:
+        self.name = name
+        self.params = params
+        self.cfg = cfg
+
+    def compute(self, ctx: TickContext) -> Wrench:
+        """The cue's wrench this tick, in {B}, about the point it names."""
+        raise NotImplementedError(f"{type(self).__name__}.compute")
+
+    def damping_matrix(self, ctx: TickContext) -> Mat | None:
+        """D (6 x 6) when the wrench is -D J_G θ̇ about p_G (a viscous term): the integrator then treats
+        it implicitly. None (default): the wrench is taken as it is."""
+        return None
+
+    def telemetry(self, ctx: TickContext, wrench: Wrench) -> tuple[float, ...]:
+        """One number per :attr:`telemetry_fields` entry, logged with the cue's wrench."""
+        return ()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lapwrench.config import InteractionConfig
 from lapwrench.jit import kernel
 from lapwrench.spatial import Mat, Vec, Wrench
-from lapwrench.wrenches.base import TickContext
+from lapwrench.wrenches.base import Cue, TickContext
 
 
 @kernel
@@ -42,25 +41,33 @@ def interaction_wrench(force_H: Vec, torque_H: Vec, R_H: Mat, delta: float) -> t
     return moment, force
 
 
-class InteractionWrench:
-    """W_h about the handle point p_H; zero when the F/T or tactile reading is missing."""
+class InteractionCue(Cue):
+    """W_h (eq 6) about the handle point p_H; zero when the F/T or tactile reading is missing.
 
-    name = "interaction"
+    Parameters: the ``interaction:`` section (k_H, k_min, the contact threshold).
+    """
 
-    def __init__(self, cfg: InteractionConfig) -> None:
-        self.cfg = cfg
-        self.delta = 0.0
-        self.contacts = 0
+    inputs = ("ft", "tactile")
+    config_section = "interaction"
+    fused = True
+    telemetry_fields = ("delta", "contacts")
+
+    def grip(self, ctx: TickContext) -> tuple[float, int]:
+        """This tick's grip gain δ and contact count n_c (eq 7); (0, 0) without a tactile reading."""
+        tactile = ctx.inputs.tactile
+        if tactile is None:
+            return 0.0, 0
+        p = self.params
+        return grip_gain(tactile.values, p.k_H, p.k_min, float(p.contact_threshold))
 
     def compute(self, ctx: TickContext) -> Wrench:
-        kin, ft, tactile = ctx.kin, ctx.inputs.ft, ctx.inputs.tactile
-        if tactile is None:
-            self.delta, self.contacts = 0.0, 0
-        else:
-            self.delta, self.contacts = grip_gain(
-                tactile.values, self.cfg.k_H, self.cfg.k_min, self.cfg.contact_threshold
-            )
-        if ft is None or self.delta == 0.0:
+        kin, ft = ctx.kin, ctx.inputs.ft
+        delta, _ = self.grip(ctx)
+        if ft is None or delta == 0.0:
             return Wrench.zero(kin.p_H)
-        moment, force = interaction_wrench(ft.force, ft.torque, kin.R_H, self.delta)
+        moment, force = interaction_wrench(ft.force, ft.torque, kin.R_H, delta)
         return Wrench(moment, force, kin.p_H)
+
+    def telemetry(self, ctx: TickContext, wrench: Wrench) -> tuple[float, ...]:
+        delta, contacts = self.grip(ctx)
+        return delta, float(contacts)

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lapwrench.config import RcmConfig
 from lapwrench.jit import kernel
 from lapwrench.spatial import Vec, Wrench
-from lapwrench.wrenches.base import TickContext
+from lapwrench.wrenches.base import Cue, TickContext
 
 
 @kernel
@@ -16,15 +15,17 @@ def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     return -Kp * e_R - Kd * e_R_rate
 
 
-class RcmWrench:
-    """Eq (13): W_r = [0; F_r], applied through J_R in the task space (eq 2)."""
+class RcmCue(Cue):
+    """Eq (13): W_r = [0; F_r] about p_R, applied through J_R in the task space (eq 2).
 
-    name = "rcm"
+    Parameters: the ``rcm:`` section (K_p, K_d). The primary task: it cannot be switched off.
+    """
 
-    def __init__(self, cfg: RcmConfig) -> None:
-        self.cfg = cfg
+    priority = "task"
+    config_section = "rcm"
+    fused = True
 
     def compute(self, ctx: TickContext) -> Wrench:
         g = ctx.geometry
         # e_R at the reference plus what the measured pose adds (motion/measured_feedback.py)
-        return Wrench(np.zeros(3), rcm_force(g.e_R + g.e_R_offset, g.e_R_rate, self.cfg.Kp, self.cfg.Kd), g.p_R)
+        return Wrench(np.zeros(3), rcm_force(g.e_R + g.e_R_offset, g.e_R_rate, self.params.Kp, self.params.Kd), g.p_R)

@@ -7,11 +7,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.config import CameraConfig, TrackingConfig
+from lapwrench.config import CameraConfig, Config, TrackingConfig
 from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
 from lapwrench.spatial import Mat, Vec, Wrench
-from lapwrench.wrenches.base import TickContext
+from lapwrench.wrenches.base import Cue, TickContext
 
 
 class TrackingParams(NamedTuple):
@@ -90,18 +90,22 @@ def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
     return F * (p.F_sum_max / norm) if norm > p.F_sum_max else F
 
 
-class TrackingWrench:
-    """W_c = [0; F_c] about the camera point p_C (eq 8)."""
+class TrackingCue(Cue):
+    """W_c = [0; F_c] about the camera point p_C (eq 8-12).
 
-    name = "tracking"
+    Parameters: the ``tracking:`` section, with the ``camera:`` intrinsics.
+    """
 
-    def __init__(self, camera: CameraConfig, cfg: TrackingConfig) -> None:
-        self.camera = camera
-        self.cfg = cfg
-        self.params = TrackingParams.from_config(camera, cfg)
+    inputs = ("instruments",)
+    config_section = "tracking"
+    fused = True
+
+    def __init__(self, name: str, params: TrackingConfig, cfg: Config) -> None:
+        super().__init__(name, params, cfg)
+        self.tracking = TrackingParams.from_config(cfg.camera, params)
 
     def compute(self, ctx: TickContext) -> Wrench:
         obs = ctx.inputs.instruments
         if obs is None or len(obs.points) == 0:
             return Wrench.zero(ctx.kin.p_C)
-        return Wrench(np.zeros(3), virtual_force(obs.points, self.params, ctx.kin.R_C), ctx.kin.p_C)
+        return Wrench(np.zeros(3), virtual_force(obs.points, self.tracking, ctx.kin.R_C), ctx.kin.p_C)

@@ -203,6 +203,21 @@ class UdpRecordStream(StreamingSource[Wrench]):
         if accepted is not None:
             self._publish_raw(*accepted, now)
 
+    def feed(self, data: bytes, now: float) -> bool:
+        """Handle one datagram received at ``now`` exactly as the reader thread does, without a
+        socket (to replay a captured stream): publish it if it passes the checks, count it if it
+        is malformed. True if it was published.
+        """
+        try:
+            accepted = self._accept_datagram(data)
+        except PacketError as exc:
+            self._record_malformed(exc)
+            return False
+        if accepted is None:
+            return False
+        self._publish_raw(*accepted, now)
+        return True
+
     def _accept_datagram(self, data: bytes) -> tuple[NDArray[np.float64], FTRecord] | None:
         """Decode and check one datagram (sequence, status, tare); the raw wrench (N, N·m, bias
         not removed, :data:`WIRE_ORDER`) and its record, or ``None`` for a duplicate/out-of-order record.

@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from lapwrench.loop_stats import Cycle
 
 
 def plain_list(x: Any) -> Any:
@@ -94,3 +97,21 @@ class CycleRecord:
             "compute_us": plain_float(self.compute_us),
             "cycle_us": plain_float(self.cycle_us),
         }
+
+
+def cycle_record(c: Cycle, supervisor: str, alarm: bool, tau_J: Any = None) -> CycleRecord | None:
+    """The record of one loop cycle (None after a failed tick: nothing to log but its events), with the
+    supervisor's state and alarm flag after it and the robot's measured joint torques if it has them."""
+    r, frame, reading = c.result, c.frame, c.reading
+    if r is None:
+        return None
+    ft, ta, ins = frame.ft, frame.tactile, frame.instruments
+    return CycleRecord(
+        t=frame.time, robot_time=reading.stamp, k=c.k, q=reading.q, dq=reading.dq, tau_J=tau_J,
+        external_force=reading.external_force, ft_force=None if ft is None else ft.force,
+        ft_torque=None if ft is None else ft.torque, tactile=None if ta is None else ta.values,
+        instruments=None if ins is None else ins.points, wrenches=r.wrenches, mode=r.mode, delta=r.delta,
+        contacts=r.contacts, p_R=r.p_R, p_G=r.p_G, e_R=r.e_R, rcm_error=r.rcm_error,
+        rcm_error_measured=c.scope.rcm_error, q_ref=r.q_ref, q_cmd=c.q_cmd, supervisor=supervisor, alarm=alarm,
+        compute_us=c.compute * 1e6, cycle_us=c.period * 1e6,
+    )

@@ -68,17 +68,17 @@ class McapSink:
     logger's own (nothing else logged in the process lands in the file, and vice versa).
 
     Args:
-        path: The ``.mcap`` file (replaced if it exists).
+        path: The ``.mcap`` file (replaced if it exists); None: no file (live telemetry only).
         with_frames: Open the transform, pose and wrench-arrow channels (the logger has a model).
     """
 
-    def __init__(self, path: Path, with_frames: bool) -> None:
+    def __init__(self, path: Path | None, with_frames: bool) -> None:
         import foxglove
         from foxglove import channels as fc
 
         cycle_message_classes()  # built here, not with the first cycle on the writer thread
         self.context = foxglove.Context()
-        self.writer = foxglove.open_mcap(path, allow_overwrite=True, context=self.context)
+        self.writer = None if path is None else foxglove.open_mcap(path, allow_overwrite=True, context=self.context)
         ctx = self.context
         self.json = {
             topic: foxglove.Channel(topic, schema=schema, context=ctx)
@@ -114,5 +114,6 @@ class McapSink:
 
     def close(self, stats: dict[str, Any]) -> None:
         """The stats as an MCAP metadata record, then the file's summary and footer."""
-        self.writer.write_metadata("lapwrench.log_stats", {k: str(v) for k, v in stats.items()})
-        self.writer.close()
+        if self.writer is not None:
+            self.writer.write_metadata("lapwrench.log_stats", {k: str(v) for k, v in stats.items()})
+            self.writer.close()

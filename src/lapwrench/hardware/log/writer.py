@@ -17,6 +17,7 @@ import numpy as np
 
 from lapwrench.hardware.log.cycle_codec import encode_cycle
 from lapwrench.hardware.log.frames import FrameSolver, ScopeFrames, finite_vector
+from lapwrench.hardware.log.live import LiveAddress, LiveServer
 from lapwrench.hardware.log.messages import (
     frame_transforms_message,
     image_message,
@@ -64,32 +65,49 @@ class RunLogger:
     """Writes a run to an MCAP file (foxglove-sdk) from a background thread.
 
     Args:
-        path: Output ``.mcap`` file (parent folders are created; an existing file is replaced).
+        path: Output ``.mcap`` file (parent folders are created; an existing file is replaced); None
+            writes no file (with ``live``: telemetry only).
         meta: Written once on ``/lapwrench/meta``.
         model: The robot model. With it the writer adds the frame transforms, the scope pose and
             the wrench arrows (forward kinematics of the logged measured q, on the writer thread).
         capacity: Cycle records the ring holds before new ones are dropped (and counted).
         transform_rate_hz: Rate (session time) of the transforms, pose, joint states and arrows.
+        live: Also serve every channel live to Foxglove at this address (:mod:`.live`; LiveError if
+            the server cannot start), with the model's URDF.
+        start: Start the writer thread now (default). With False, records queue in the rings (and
+            overflow into the drop counters) until :meth:`start`; :meth:`close` starts it if needed.
     """
 
     def __init__(
         self,
-        path: str | Path,
+        path: str | Path | None,
         meta: dict[str, Any] | None = None,
         *,
         model: RobotModel | None = None,
         capacity: int = CYCLE_CAPACITY,
         transform_rate_hz: float = TRANSFORM_RATE_HZ,
+        live: LiveAddress | None = None,
+        start: bool = True,
     ) -> None:
         if capacity < 1 or not transform_rate_hz > 0:
             raise ValueError("capacity must be ≥ 1 and transform_rate_hz > 0")
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if path is None and live is None:
+            raise ValueError("a RunLogger writes a file, serves live telemetry, or both")
+        self.path = None if path is None else Path(path)
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         self.capacity = capacity
         self.transform_rate_hz = transform_rate_hz
         self.counters = LogCounters()
         self._solver = FrameSolver(model) if model is not None else None
         self._sink = McapSink(self.path, with_frames=self._solver is not None)
+        self.live: LiveServer | None = None
+        if live is not None:
+            try:
+                self.live = LiveServer(self._sink.context, live, None if model is None else model.urdf)
+            except Exception:
+                self._sink.close({})  # the file stays a valid (empty) MCAP
+                raise
         self._ring: deque[CycleRecord] = deque()  # bounded by cycle(); appended by the loop only
         self._events: deque[tuple[float, str, str]] = deque()
         self._images: deque[tuple[float, Any, str]] = deque()
@@ -101,7 +119,13 @@ class RunLogger:
         if meta is not None:
             self._sink.write_json(META_TOPIC, 0, json_bytes(meta))
         self._thread = threading.Thread(target=self._run, name="lapwrench-mcap", daemon=True)
-        self._thread.start()
+        if start:
+            self._thread.start()
+
+    def start(self) -> None:
+        """Start the writer thread (when built with ``start=False``); idempotent."""
+        if self._thread.ident is None and not self._closed:  # never started
+            self._thread.start()
 
     # -- loop side: O(1), never blocks ----------------------------------------------------------
     def cycle(self, record: CycleRecord) -> None:
@@ -203,6 +227,8 @@ class RunLogger:
         with a finite measured q also queues its frame set, written in the next rounds."""
         ns = log_time_ns(rec.t)
         self._sink.cycle.log(encode_cycle(rec), ns)
+        if self.live is not None:
+            self.live.publish_description(ns)
         self.counters.cycles += 1
         self._last_ns = max(self._last_ns, ns)
         if rec.t >= self._next_frames_t - 1e-6 and not self._jobs:
@@ -260,8 +286,9 @@ class RunLogger:
         dropped) and finish the file. Idempotent."""
         if self._closed:
             return
-        self._closed = True
         self._closing.set()
+        self.start()  # a logger never started still writes what it holds
+        self._closed = True
         self._thread.join()
         stats = self.stats()
         ns = self._last_ns
@@ -275,6 +302,8 @@ class RunLogger:
             stats = self.stats()
         self._sink.write_json(STATS_TOPIC, ns, json_bytes(stats))
         self._sink.close(stats)
+        if self.live is not None:
+            self.live.stop()
 
     def __enter__(self) -> RunLogger:
         return self

@@ -18,22 +18,19 @@ from functools import cache
 import mujoco
 import numpy as np
 
-from lapwrench.robot.description import ARM_SPECS, FRAME_E, RobotKind, ScopeGeometry, build_urdf
+from lapwrench.robot.arms import arm_spec
+from lapwrench.robot.description import FRAME_E, RobotKind, ScopeGeometry, build_urdf
 from lapwrench.robot.limits import joint_torque_limits
 
 #: The Panda's joint torque limits (N m), one per joint (each scene clips to its own robot's,
-#: :func:`~lapwrench.robot.limits.joint_torque_limits`).
+#: :func:`~lapwrench.robot.limits.joint_torque_limits`, from the arm's spec).
 TAU_MAX = joint_torque_limits("panda")
-
-_ARM_RGBA = {"panda": (0.92, 0.92, 0.94, 1.0), "fr3": (0.93, 0.93, 0.93, 1.0)}
 
 
 def default_initial_configuration(kind: RobotKind = "panda") -> np.ndarray:
     """Initial joint configuration q0 (rad): scope pointing down into the abdomen (the robot spec's
     ``sim_start_pose``: flange 0.482 m above the base, 0.5 m in front, z_E = -z_B)."""
-    if kind not in ARM_SPECS:
-        raise ValueError(f"unknown robot {kind!r}; choose one of {tuple(ARM_SPECS)}")
-    return np.array(ARM_SPECS[kind].sim_start_pose, dtype=float)
+    return np.array(arm_spec(kind).sim_start_pose, dtype=float)
 
 
 def _mujoco_urdf_text(kind: RobotKind, scope: ScopeGeometry) -> str:
@@ -70,13 +67,13 @@ def build_arm_spec(
     spec = mujoco.MjSpec.from_string(_mujoco_urdf_text(kind, scope))
     spec.modelname = f"{kind}_laparoscope"
     spec.compiler.discardvisual = False  # the URDF's .dae visuals are already gone; keep our visual geoms
-    arm = ARM_SPECS[kind]
+    arm = arm_spec(kind)
     for name in arm.joint_names:
         j = spec.joint(name)
         j.frictionloss = 0.0
         j.armature = armature
         j.actgravcomp = True
-    rgba = _ARM_RGBA[kind]
+    rgba = arm.look.rgba
     for g in spec.geoms:
         g.contype = 0
         g.conaffinity = 0
@@ -92,9 +89,10 @@ def build_arm_spec(
 
 
 def add_link_capsules(spec: mujoco.MjSpec, kind: RobotKind) -> None:
-    """Primitive visuals for arm links that come without geometry (the FR3 description)."""
-    arm = ARM_SPECS[kind]
-    rgba = _ARM_RGBA[kind]
+    """Primitive visuals for arm links that come without geometry (the FR3 description): capsules of the
+    spec's radius between successive joints, a disc at the flange."""
+    arm = arm_spec(kind)
+    rgba, radius = arm.look.rgba, arm.look.capsule_radius
     for b in _descendants(spec.worldbody):
         if b.name.startswith("lap_") or list(b.geoms):
             continue
@@ -104,7 +102,7 @@ def add_link_capsules(spec: mujoco.MjSpec, kind: RobotKind) -> None:
                 b.add_geom(
                     type=mujoco.mjtGeom.mjGEOM_CAPSULE,
                     fromto=[0, 0, 0, *d],
-                    size=[0.045, 0, 0],
+                    size=[radius, 0, 0],
                     rgba=rgba,
                     contype=0,
                     conaffinity=0,
@@ -112,10 +110,10 @@ def add_link_capsules(spec: mujoco.MjSpec, kind: RobotKind) -> None:
                     mass=0.0,
                     density=0.0,
                 )
-        if b.name == arm.flange_link or b.name.endswith("link7"):
+        if b.name == arm.flange_link:
             b.add_geom(
                 type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                size=[0.04, 0.02, 0],
+                size=[0.9 * radius, 0.02, 0],
                 pos=[0, 0, -0.02],
                 rgba=rgba,
                 contype=0,
@@ -126,10 +124,11 @@ def add_link_capsules(spec: mujoco.MjSpec, kind: RobotKind) -> None:
 
 
 def add_joint_servos(spec: mujoco.MjSpec, kind: RobotKind) -> None:
-    """One joint position servo per arm joint, its joint torque clipped to the robot's torque limit."""
+    """One joint position servo per arm joint, its joint torque clipped to the robot's torque limit
+    (the spec's table)."""
     # Franka-like joint position servo: tau = kp (q_ref - q) + kv (dq_ref - dq), plus gravity
     # compensation (jnt actgravcomp); the SimWorld sets kp/kv. The sum is clipped to tau_max.
-    for name, tau in zip(ARM_SPECS[kind].joint_names, joint_torque_limits(kind), strict=True):
+    for name, tau in zip(arm_spec(kind).joint_names, joint_torque_limits(kind), strict=True):
         j = spec.joint(name)
         j.actfrclimited = True
         j.actfrcrange = [-tau, tau]
@@ -147,7 +146,7 @@ def flange_pose_at(kind: RobotKind, scope: ScopeGeometry, q0: tuple[float, ...])
     spec = build_arm_spec(kind, scope)
     m = spec.compile()
     d = mujoco.MjData(m)
-    adr = [m.joint(n).qposadr[0] for n in ARM_SPECS[kind].joint_names]
+    adr = [m.joint(n).qposadr[0] for n in arm_spec(kind).joint_names]
     d.qpos[adr] = q0
     mujoco.mj_kinematics(m, d)
     b = m.body(FRAME_E).id

@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 
 from lapwrench.rcm.geometry import initial_rcm_point
-from lapwrench.robot.description import ARM_SPECS
+from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.model import ScopeAxis, scope_axis
 from lapwrench.sim.scene.arm import add_joint_servos, add_link_capsules, build_arm_spec, flange_pose_at
 from lapwrench.sim.scene.camera import add_overview_camera, configure_rendering
@@ -101,5 +101,5 @@ def build_scene(config: SceneConfig | None = None) -> Scene:
         config=cfg,
         q0=q0,
         incision_position=incision,
-        arm_joint_names=ARM_SPECS[cfg.kind].joint_names,
+        arm_joint_names=arm_spec(cfg.kind).joint_names,
     )

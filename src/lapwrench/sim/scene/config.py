@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lapwrench.config import Config
-from lapwrench.robot.description import ARM_SPECS, RobotKind, ScopeGeometry
+from lapwrench.robot.arms import arm_spec
+from lapwrench.robot.description import RobotKind, ScopeGeometry
 from lapwrench.sim.scene.arm import default_initial_configuration
 from lapwrench.sim.scene.camera import CameraIntrinsics
 
@@ -90,15 +91,14 @@ class SceneConfig:
     rcm_lambda0: float = 0.8
 
     def __post_init__(self) -> None:
-        if self.kind not in ARM_SPECS:
-            raise ValueError(f"unknown robot {self.kind!r}; choose one of {tuple(ARM_SPECS)}")
+        arm = arm_spec(self.kind)  # ValueError (one line) for an arm that is not registered
         if not (0.0 < self.timestep <= 0.001 and 0.001 / self.timestep == round(0.001 / self.timestep)):
             raise ValueError(f"timestep must divide the 1 ms control period, got {self.timestep!r}")
         if not (math.isfinite(self.armature) and self.armature >= 0.0):
             raise ValueError(f"armature must be >= 0, got {self.armature!r}")
         if not (0.0 < self.rcm_lambda0 < 1.0):
             raise ValueError(f"rcm_lambda0 must lie in (0, 1), got {self.rcm_lambda0!r}")
-        n = ARM_SPECS[self.kind].n_joints
+        n = arm.n_joints
         if self.q0 is not None and len(self.q0) != n:
             raise ValueError(f"q0 needs {n} joint values, got {len(self.q0)}")
 

@@ -74,24 +74,3 @@ def instrument_pose_through_port(port: np.ndarray, tip: np.ndarray, roll: float 
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, R)
     return tip.copy(), quat
-
-
-def _instrument_pose_through_port_numpy(
-    port: np.ndarray, tip: np.ndarray, roll: float = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`instrument_pose_through_port` written with numpy's vector functions (the tests' reference)."""
-    z = np.asarray(tip, float) - np.asarray(port, float)
-    nz = np.linalg.norm(z)
-    if nz < 1e-6:
-        raise ValueError("instrument tip coincides with its port")
-    z /= nz
-    ref = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(ref, z)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    c, s = math.cos(roll), math.sin(roll)
-    x, y = c * x + s * y, -s * x + c * y
-    R = np.column_stack([x, y, z])
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, R.ravel())
-    return np.asarray(tip, float).copy(), quat

@@ -46,7 +46,7 @@ from lapwrench.sim.world.kernels import (
     _substep_torque,
 )
 from lapwrench.sim.world.loads import WorldLoads
-from lapwrench.sim.world.model_facts import _mocap_is_inert, _slice_if_contiguous
+from lapwrench.sim.world.model_facts import _slice_if_contiguous, mocap_is_inert
 from lapwrench.sim.world.rendering import WorldRendering
 from lapwrench.sim.world.stepping import WorldStepping
 
@@ -159,7 +159,7 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         self._depth_range = np.array([self._depth_min, self._depth_max])
         # The state at the last mj_forward (see the module docstring): its position/velocity stages
         # serve the next tick's first substep while this state is unchanged.
-        self._mocap_matters = not _mocap_is_inert(m)
+        self._mocap_matters = not mocap_is_inert(m)
         self._fwd = np.zeros(m.nq + m.nv + (3 + 4) * m.nmocap + m.neq)  # mocap: position, quaternion
         self._fwd_valid = False
         # The kernels bound to these argument types (compiled or loaded from numba's cache now):

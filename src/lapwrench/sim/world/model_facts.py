@@ -14,7 +14,7 @@ def _slice_if_contiguous(idx: np.ndarray) -> slice | np.ndarray:
     return slice(a, a + len(idx)) if np.array_equal(idx, np.arange(a, a + len(idx))) else idx
 
 
-def _mocap_is_inert(m: mujoco.MjModel) -> bool:
+def mocap_is_inert(m: mujoco.MjModel) -> bool:
     """True when no mocap pose can change the dynamics: the mocap subtrees have no joints and no
     colliding geoms, and no constraint, tendon, flex or actuator refers to them."""
     if m.nmocap == 0:

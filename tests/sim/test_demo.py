@@ -1,0 +1,105 @@
+"""``lapwrench demo``: the report, its reproducibility, the video, and the inputs it refuses."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from lapwrench.sim import demo as demo_mod
+from lapwrench.sim.world import SimulationUnstableError
+
+pytestmark = pytest.mark.slow  # full scenarios in the MuJoCo world
+
+
+def _physics_metrics(path: Path) -> dict:
+    data = json.loads(path.read_text())
+    runs = data["scenarios"]["rcm-disturbance"]["runs"]
+    wall_clock = ("real_time_factor", "loop_compute_p50_us", "loop_compute_p99_us", "loop_over_budget_cycles")
+    return {k: {m: v for m, v in r.items() if m not in wall_clock} for k, r in runs.items()}
+
+
+def test_demo_writes_a_report_and_a_seed_reproduces_its_metrics(tmp_path: Path) -> None:
+    metrics = []
+    for k in range(2):
+        out = tmp_path / f"run{k}"
+        plan = demo_mod.plan_demo(out, ["rcm-disturbance"], seed=3, time_scale=0.5, video=False)
+        demo_mod.run_demo(plan, progress=False)
+        for f in ("report.md", "metrics.json", "rcm_disturbance.png", "configs/rcm-disturbance.yaml"):
+            assert (out / f).is_file(), f
+        assert "Incision disturbance" in (out / "report.md").read_text()
+        metrics.append(_physics_metrics(out / "metrics.json"))
+    assert metrics[0] == metrics[1]
+
+
+def test_demo_video_of_a_tracking_scenario(tmp_path: Path) -> None:
+    plan = demo_mod.plan_demo(tmp_path, ["needle-search"], time_scale=0.2, video=True)
+    plan = demo_mod.DemoPlan(**{**plan.__dict__, "printed_damping_check": False})
+    demo_mod.run_demo(plan, progress=False)
+    mp4 = tmp_path / "needle-search.mp4"
+    assert mp4.is_file() and mp4.stat().st_size > 10_000
+    import imageio.v3 as iio
+
+    frames = iio.imread(mp4, index=None)
+    assert frames.shape[1:] == (480, 640, 3)
+    assert len(frames) == pytest.approx(26.0 * 0.2 * 25, abs=3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"scenarios": ["grip", "laparotomy"]}, "unknown scenario laparotomy"),
+        ({"config": "/nonexistent/c.yaml"}, "config file not found"),
+        ({"time_scale": 3.0}, "time scale"),
+        ({"detector": "/nonexistent/model.onnx"}, "detector must be"),
+    ],
+)
+def test_bad_demo_inputs_fail_before_any_simulation(tmp_path: Path, kwargs: dict, match: str) -> None:
+    with pytest.raises(demo_mod.DemoError, match=match):
+        demo_mod.plan_demo(tmp_path / "out", **kwargs)
+    assert not (tmp_path / "out" / "report.md").exists()
+
+
+def test_malformed_config_and_unwritable_folder(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("tracking: {epsilon1: 300}\n")
+    with pytest.raises(demo_mod.DemoError, match="epsilon2"):
+        demo_mod.plan_demo(tmp_path / "out", config=str(bad))
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(demo_mod.DemoError, match="not writable"):
+        demo_mod.plan_demo(blocker / "sub")
+
+
+def test_unstable_simulation_stops_without_a_valid_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def explode(cfg, opts):
+        raise SimulationUnstableError(1.234, "shaft-incision contact force |F| (N)", "912.0")
+
+    monkeypatch.setitem(demo_mod.SCENARIOS, "rcm-disturbance", explode)
+    (tmp_path / "report.md").write_text("stale report from an earlier run")
+    plan = demo_mod.plan_demo(tmp_path, ["rcm-disturbance"], video=False, workers=1)  # the patch is in-process
+    with pytest.raises(demo_mod.DemoError, match=r"t = 1\.2340 s.*contact force"):
+        demo_mod.run_demo(plan, progress=False)
+    assert not (tmp_path / "report.md").exists()
+    assert not (tmp_path / "metrics.json").exists()
+    assert "contact force" in (tmp_path / "FAILED.txt").read_text()
+
+
+def test_a_scenario_failing_in_a_worker_process_stops_the_demo(tmp_path: Path) -> None:
+    """With workers, the scenarios run in spawned processes; a safety stop there still ends the demo
+    with a message and FAILED.txt, no report (a 10 µm RCM bound: the incision shift trips it)."""
+    plan = demo_mod.plan_demo(tmp_path, ["rcm-disturbance"], video=False, workers=2, time_scale=0.2)
+    strict = plan.configs["rcm-disturbance"].replace(safety={"max_rcm_error": 1e-5})
+    bad = dataclasses.replace(plan, configs={"rcm-disturbance": strict})
+    with pytest.raises(demo_mod.DemoError, match=r"rcm-disturbance.*stopped"):
+        demo_mod.run_demo(bad, progress=False)
+    assert (tmp_path / "FAILED.txt").exists() and not (tmp_path / "report.md").exists()
+
+
+def test_demo_refuses_a_control_rate_other_than_the_simulated_franka(tmp_path: Path) -> None:
+    cfg = tmp_path / "rate.yaml"
+    cfg.write_text("robot: {control_rate_hz: 500}\n")
+    with pytest.raises(demo_mod.DemoError, match="control_rate_hz must be 1000"):
+        demo_mod.plan_demo(tmp_path / "out", config=str(cfg))

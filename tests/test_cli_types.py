@@ -1,0 +1,56 @@
+"""The command line's argument types and output-path checks."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from lapwrench import cli_types
+
+
+# -- the argument types -------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("parse", "good", "bad"),
+    [
+        (cli_types.positive_float, {"1": 1.0, "2.5e-3": 0.0025}, ["0", "-1", "nan", "inf", "-inf", "x", ""]),
+        (cli_types.nonnegative_float, {"0": 0.0, "3": 3.0}, ["-1e-9", "nan", "inf"]),
+        (cli_types.positive_int, {"1": 1, " 7 ": 7}, ["0", "-2", "1.5", "1e3", "9" * 5000, ""]),
+        (cli_types.nonnegative_int, {"0": 0}, ["-1"]),
+        (cli_types.int_in(0, 99), {"0": 0, "99": 99}, ["100", "-1"]),
+        (cli_types.float_in(0.05, 1.0), {"0.05": 0.05, "1": 1.0}, ["0.04", "1.01", "nan"]),
+        (cli_types.float_in(0.0, 1.0, lo_open=True), {"1e-9": 1e-9}, ["0", "-0.0"]),
+        (cli_types.host_address, {"172.16.0.2": "172.16.0.2", "::1": "::1", "robot.local": "robot.local"},
+         ["", "300.1.2.3", "1.2.3", "a b", "-bad-.lan", "x" * 300, "a..b"]),
+        (cli_types.hex_bytes, {"AA55": b"\xaa\x55", "aa 55": b"\xaa\x55", "0xFF": b"\xff"},
+         ["", "A", "ZZ", "0x", "00" * 9]),
+        (cli_types.cpu_list, {"0": "0", "": ""}, ["a", "1,", "-1", "0;1", "100000"]),
+        (cli_types.host_port,
+         {"": ("127.0.0.1", 8765), ":0": ("127.0.0.1", 0), "0.0.0.0:9000": ("0.0.0.0", 9000),
+          "ws.local": ("ws.local", 8765), "[::1]:81": ("::1", 81), "[::1]": ("::1", 8765)},
+         ["1.2.3.4.5:9", ":70000", ":-1", ":x", "a b:1", "[::1", "[::1]x", "host:", "[::1]:"]),
+    ],
+)
+def test_argument_types(parse, good: dict, bad: list[str]) -> None:  # type: ignore[no-untyped-def]
+    for text, want in good.items():
+        assert parse(text) == want
+    for text in bad:
+        with pytest.raises(argparse.ArgumentTypeError) as info:
+            parse(text)
+        assert len(str(info.value)) < 200
+
+
+def test_output_path_checks_create_nothing(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert cli_types.writable_file_problem(tmp_path / "new" / "deeper" / "log.mcap") is None
+    assert cli_types.writable_dir_problem(tmp_path / "new" / "deeper") is None
+    assert not (tmp_path / "new").exists()
+    assert "not a folder" in (cli_types.writable_file_problem(blocker / "log.mcap") or "")
+    assert "not a folder" in (cli_types.writable_dir_problem(blocker / "sub" / "dir") or "")
+    assert "folder, not a file" in (cli_types.writable_file_problem(tmp_path) or "")
+    assert "file, not a folder" in (cli_types.writable_dir_problem(blocker) or "")
+    assert cli_types.writable_file_problem("") == "is empty"
+    assert "NUL" in (cli_types.writable_file_problem("a\0b") or "")
+    assert "not a usable path" in (cli_types.writable_file_problem(tmp_path / ("x" * 5000)) or "")

@@ -1,0 +1,103 @@
+"""The one control loop (lapwrench.loop) on the virtual robot: sources, supervisor, deadlines, faults."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from lapwrench.config import load
+from lapwrench.controller import Controller
+from lapwrench.hardware.runner import ControlLoop as HardwareLoop
+from lapwrench.loop import ControlLoop
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.sensors import ForceTorqueReading, TactileReading
+from lapwrench.sources import Observable
+from lapwrench.virtual import DEFAULT_Q0, VirtualRobot, tactile_for_delta
+
+CFG = load()
+DT = CFG.robot.dt
+
+
+def _loop(**kw: object) -> tuple[ControlLoop, list[float]]:
+    clock = [0.0]
+    robot = VirtualRobot("panda", DEFAULT_Q0, DT)
+    ctrl = Controller(CFG)
+    sup = SafetySupervisor(ctrl.model.limits, DT, SupervisorConfig.from_config(CFG, max_consecutive_misses=3))
+    sources = [
+        Observable("ft", lambda t: ForceTorqueReading(np.array([10.0, 0.0, 0.0]), np.zeros(3), t),
+                   update_interval=DT, max_age=0.005),
+        Observable("tactile", lambda t: TactileReading(tactile_for_delta(2.0, CFG.interaction.k_H), t),
+                   update_interval=DT, max_age=0.005),
+    ]
+    loop = ControlLoop(robot, ctrl, sup, sources, clock=lambda: clock[0], switch_interval=None, **kw)  # type: ignore[arg-type]
+    loop.start()
+    return loop, clock
+
+
+def _cycles(loop: ControlLoop, clock: list[float], n: int) -> list:  # type: ignore[type-arg]
+    out = []
+    for _ in range(n):
+        out.append(loop.cycle())
+        clock[0] += DT
+    return out
+
+
+def test_the_hand_moves_the_virtual_robot_through_the_loop() -> None:
+    loop, clock = _loop(wall_deadlines=False)
+    cycles = _cycles(loop, clock, 500)
+    assert all(c.result is not None and c.result.mode == "handle" for c in cycles[1:])
+    assert np.linalg.norm(loop.robot.q - DEFAULT_Q0) > 1e-3  # type: ignore[attr-defined]
+    assert max(c.scope.rcm_error for c in cycles) < 1e-3
+    assert all(c.compute > 0.0 for c in cycles)
+
+
+def test_a_silent_source_is_reported_stale_and_its_wrench_is_off() -> None:
+    loop, clock = _loop(wall_deadlines=False)
+    ft = loop.sources[0]
+    _cycles(loop, clock, 10)
+    ft.read = lambda t: None  # type: ignore[attr-defined]  # the F/T goes silent
+    cycles = _cycles(loop, clock, 20)
+    kinds = [e.kind for c in cycles for e in c.events]
+    assert "input_stale" in kinds
+    assert cycles[-1].frame.ft is None and not cycles[-1].result.wrenches["interaction"].any()
+
+
+def test_wall_clock_deadlines_only_when_asked() -> None:
+    slow = lambda k: time.sleep(0.002)  # noqa: E731  # 2 ms of compute, over the 0.8 ms budget
+    loop, clock = _loop(wall_deadlines=False, compute_hook=slow)
+    _cycles(loop, clock, 5)
+    assert loop.supervisor.deadline_misses == 0 and loop.over_budget == 5 and not loop.supervisor.alarm
+    loop, clock = _loop(wall_deadlines=True, compute_hook=slow)
+    _cycles(loop, clock, 5)
+    assert loop.supervisor.deadline_misses == 5 and loop.supervisor.alarm  # 3 in a row: alarm
+
+
+def test_a_controller_exception_becomes_an_alarm_and_the_arm_stops_at_rest() -> None:
+    loop, clock = _loop(wall_deadlines=False)
+    _cycles(loop, clock, 200)
+    loop.controller.tick = lambda frame: 1 / 0  # type: ignore[method-assign, assignment, misc]
+    c = loop.cycle()
+    assert c.result is None and loop.supervisor.alarm
+    assert loop.supervisor.alarm_reason.startswith("controller_error")  # type: ignore[union-attr]
+    for _ in range(5000):
+        if loop.supervisor.at_rest:
+            break
+        loop.hold_cycle()
+    assert loop.supervisor.at_rest
+
+
+def test_one_loop_class_serves_virtual_simulated_and_hardware_runs() -> None:
+    from lapwrench.sim.loop import ClosedLoop
+
+    assert issubclass(HardwareLoop, ControlLoop)
+    assert ClosedLoop.__init__.__code__.co_names.count("ControlLoop") == 1
+
+
+def test_two_sources_of_one_kind_are_refused() -> None:
+    ctrl = Controller(CFG)
+    sup = SafetySupervisor(ctrl.model.limits, DT)
+    ft = Observable("ft", lambda t: None, update_interval=DT, max_age=0.01)
+    with pytest.raises(ValueError, match="one source per kind"):
+        ControlLoop(VirtualRobot("panda", DEFAULT_Q0, DT), ctrl, sup, [ft, ft])

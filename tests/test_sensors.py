@@ -1,0 +1,92 @@
+"""The input validator: valid readings pass as they are, converted to aligned C-contiguous float64."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from lapwrench.config import load
+from lapwrench.robot.model import RobotModel
+from lapwrench.sensors import (
+    ForceTorqueReading,
+    InputValidator,
+    InstrumentObservation,
+    RobotReading,
+    SensorFrame,
+    TactileReading,
+)
+from lapwrench.virtual import DEFAULT_Q0
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel()
+
+
+def _unaligned(values: np.ndarray) -> np.ndarray:
+    """A float64 array with the values of ``values`` in memory that is not 8-byte aligned."""
+    raw = bytearray(values.nbytes + 1)
+    a = np.frombuffer(raw, dtype=np.float64, count=values.size, offset=1).reshape(values.shape)
+    a[...] = values
+    assert not a.flags.aligned
+    return a
+
+
+# -- the validator -------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def validator(model: RobotModel) -> InputValidator:
+    cfg = load()
+    return InputValidator(cfg.interaction, cfg.camera, model.limits, cfg.inputs.max_image_age)
+
+
+def _frame(make: Callable[..., object] = np.array) -> SensorFrame:
+    return SensorFrame(
+        1.0,
+        ForceTorqueReading(make([1.0, 2.0, 3.0]), make([0.1, 0.0, 0.0]), 1.0),
+        TactileReading(make(np.full(64, 60.0)), 1.0),
+        InstrumentObservation(make(np.array([[100.0, 200.0], [300.0, 50.0]])), 1.0),
+        RobotReading(make(DEFAULT_Q0.copy()), make(np.zeros(7)), make([5.0, 0.0, 0.0]), 1.0),
+    )
+
+
+def _arrays(out: object) -> list[np.ndarray]:
+    readings = (out.ft, out.tactile, out.instruments, out.robot)  # type: ignore[attr-defined]
+    return [v for r in readings for v in vars(r).values() if isinstance(v, np.ndarray)]
+
+
+def test_valid_readings_pass_on_as_they_are(validator: InputValidator) -> None:
+    frame = _frame()
+    out = validator.validate(frame)
+    assert out.events == []
+    assert out.ft is frame.ft and out.tactile is frame.tactile
+    assert out.instruments is frame.instruments and out.robot is frame.robot
+
+
+@pytest.mark.parametrize("make", [list, _unaligned, lambda v: np.asarray(v, dtype=np.float32),
+                                  lambda v: np.repeat(v, 2, axis=0)[::2]],
+                         ids=["lists", "unaligned", "float32", "strided"])
+def test_converted_readings_hold_aligned_c_contiguous_float64(
+    validator: InputValidator, make: Callable[[np.ndarray], object]
+) -> None:
+    out = validator.validate(_frame(lambda v: make(np.array(v, dtype=np.float64))))
+    assert out.events == []
+    arrays = _arrays(out)
+    assert len(arrays) == 7  # F/T 2, tactile, points, robot 3
+    for a in arrays:
+        assert a.dtype == np.float64 and a.flags.c_contiguous and a.flags.aligned
+    plain = validator.validate(_frame(lambda v: np.array(make(np.array(v, dtype=np.float64)), dtype=np.float64)))
+    want = _arrays(plain)
+    for a, b in zip(arrays, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_rejected_external_force_keeps_the_joint_state(validator: InputValidator) -> None:
+    frame = _frame()
+    robot = frame.robot
+    assert robot is not None
+    bad = SensorFrame(1.0, robot=RobotReading(robot.q, robot.dq, np.array([400.0, 0.0, 0.0]), 1.0))
+    out = validator.validate(bad)
+    assert [e.source for e in out.events] == ["external_force"]
+    assert out.robot is not None and out.robot.external_force is None and out.robot.q is robot.q
