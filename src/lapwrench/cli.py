@@ -3,17 +3,27 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from lapwrench import config as config_mod
-from lapwrench.cli_types import ArgumentParser, float_in, int_in, output_dir
+from lapwrench.cli_types import (
+    FOXGLOVE_DEFAULT,
+    ArgumentParser,
+    float_in,
+    host_port,
+    int_in,
+    listen_problem,
+    output_dir,
+)
 
 MIN_VIRTUAL_SECONDS = 0.1  # enough ticks for the metrics and the plot
 MAX_VIRTUAL_SECONDS = 3600.0  # the virtual run keeps every tick in memory
@@ -110,6 +120,35 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def live_telemetry(address: tuple[str, int] | None, robot: str, command: str) -> Iterator[None]:
+    """With an address: every simulated cycle (decimated) served live to Foxglove while the block runs
+    (:class:`~lapwrench.hardware.log.live.SimTelemetry`); without one, nothing."""
+    if address is None:
+        yield
+        return
+    from lapwrench.hardware.log import RunLogger
+    from lapwrench.hardware.log.live import LiveError, SimTelemetry
+    from lapwrench.robot.model import RobotModel
+    from lapwrench.sim.loop import observe_cycles
+
+    problem = listen_problem(*address)
+    if problem:
+        raise UsageError(f"--foxglove {problem}")
+    try:
+        logger = RunLogger(None, {"command": command, "robot": robot}, model=RobotModel(robot), live=address)
+    except LiveError as exc:
+        raise UsageError(f"--foxglove {exc}") from exc
+    assert logger.live is not None
+    host, port = logger.live.address
+    print(f"lapwrench {command}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
+    try:
+        with observe_cycles(SimTelemetry(logger)):
+            yield
+    finally:
+        logger.close()
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job: the paper's experiments in the MuJoCo world, written to a report folder."""
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -125,13 +164,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
             time_scale=args.time_scale,
             video=not args.no_video,
             detector=args.detector,
-            workers=args.workers,
+            workers=1 if args.foxglove else args.workers,  # live: the scenarios run here, one after another
             robot=args.robot,
         )
     except DemoError as exc:  # a bad argument or input file, found before anything ran
         raise UsageError(str(exc)) from exc
     try:
-        results = run_demo(plan, progress=not args.quiet)
+        with live_telemetry(args.foxglove, plan.robot, "demo"):
+            results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:  # a run that failed (FAILED.txt says why)
         print(f"lapwrench demo: {exc}", file=sys.stderr)
         return 1
@@ -156,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenarios",
         nargs="+",
         metavar="NAME",
-        help="grip, rcm-disturbance, needle-search, workflow, hard-push (default: all)",
+        help="grip, rcm-disturbance, needle-search, workflow, hard-push, zoom, keep-out (default: all)",
     )
     demo.add_argument("--config", help="YAML configuration or preset for every scenario (default: the paper's)")
     demo.add_argument(
@@ -165,6 +205,10 @@ def build_parser() -> argparse.ArgumentParser:
         " hard-push, tuned for the Franka)",
     )
     demo.add_argument("--tracking-config", help="configuration for needle-search and workflow")
+    demo.add_argument(
+        "--foxglove", nargs="?", const=host_port(FOXGLOVE_DEFAULT), type=host_port, default=None, metavar="HOST:PORT",
+        help=f"watch the runs live in Foxglove (default {FOXGLOVE_DEFAULT}; the scenarios then run one at a time)",
+    )
     demo.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="random seed (0 to 2^32-1; default 0)")
     demo.add_argument(
         "--time-scale", type=float_in(0.05, 1.0), default=1.0, help="shorten the scenarios (0.05-1; default 1)"

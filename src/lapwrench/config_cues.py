@@ -84,7 +84,14 @@ def _entry(name: str, data: Any) -> CueEntry:
             raise ConfigError(f"config key '{key}.{first}': cue '{kind}' takes no parameters here "
                               f"(its parameters: {where})", f"{key}.{first}")
         return CueEntry(name, kind, enabled)
-    return CueEntry(name, kind, enabled, build(params_cls, values, key))
+    try:
+        params = build(params_cls, values, key)
+    except ConfigError as exc:  # raised by the plugin's own checks (Params.__post_init__): name the cue
+        if exc.key is not None and exc.key.startswith(f"{key}."):
+            raise
+        sub = f"{key}.{exc.key}" if exc.key else key
+        raise ConfigError(f"config key '{sub}': {exc}", sub) from exc
+    return CueEntry(name, kind, enabled, params)
 
 
 def parse_cues(data: Any) -> tuple[CueEntry, ...]:

@@ -29,7 +29,7 @@ import mujoco
 from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
-from lapwrench.sim import report
+from lapwrench.sim import cue_scenarios, report
 from lapwrench.sim.loop import SafetyStopError
 from lapwrench.sim.results import ScenarioOptions, ScenarioResult
 from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, needle_search, scenarios_for
@@ -357,14 +357,14 @@ def _write_failed(out: Path, exc: BaseException) -> None:
 
 
 def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
-    if name == "grip":
-        return report.plot_grip(res, out)
-    if name == "rcm-disturbance":
-        return report.plot_disturbance(res, out)
-    if name == "hard-push":
-        return report.plot_hard_push(res, out)
     stem = name.replace("-", "_")
-    figs = report.plot_tracking_run(res, out, stem)
+    cues = report.plot_cues(res, out, stem)  # every cue the config ran, by name
+    own = {"grip": report.plot_grip, "rcm-disturbance": report.plot_disturbance, "hard-push": report.plot_hard_push}
+    if name in own:
+        return own[name](res, out) + cues
+    if name in cue_scenarios.SCENARIOS:
+        return cue_scenarios.plot(name, res, out) + cues
+    figs = report.plot_tracking_run(res, out, stem) + cues
     if res.frames:
         figs.append(report.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
     if (out / f"{name}.mp4").exists():

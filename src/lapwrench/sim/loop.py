@@ -8,7 +8,8 @@ when asked for — from the projection of the simulator's known instrument geome
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
+from lapwrench.loop_stats import Cycle
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
 from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.arms import arm_spec
@@ -128,6 +130,22 @@ class Trace:
         return key in self.columns
 
 
+CycleObserver = Callable[["ClosedLoop", Cycle], None]
+_OBSERVERS: list[CycleObserver] = []
+
+
+@contextlib.contextmanager
+def observe_cycles(observer: CycleObserver) -> Iterator[None]:
+    """Every :class:`ClosedLoop` built while this is active calls ``observer(loop, cycle)`` after each
+    of its cycles (the command sent): how an application above the simulation (live telemetry) sees
+    the runs of scenarios that build their own loops."""
+    _OBSERVERS.append(observer)
+    try:
+        yield
+    finally:
+        _OBSERVERS.remove(observer)
+
+
 class ClosedLoop:
     """The world, its sensors and the controller, stepped together through the one control loop
     (:class:`lapwrench.loop.ControlLoop`) on the simulated robot and simulated sources."""
@@ -173,9 +191,11 @@ class ClosedLoop:
         self.ft.tare()
         self.grip_force = 0.0
         self.t = 0.0
+        observers = list(_OBSERVERS)
         self.loop = ControlLoop(
             self.robot, self.controller, self.supervisor, self._sources(), clock=lambda: self.t,
             wall_deadlines=False, switch_interval=None,
+            on_cycle=(lambda c: [f(self, c) for f in observers]) if observers else None,
         )
         self._reading = self.loop.start()
         self.q0 = self._reading.q

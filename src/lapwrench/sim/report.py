@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from lapwrench.config import Config
+from lapwrench.sim import cue_scenarios
 from lapwrench.sim.results import ScenarioResult
 from lapwrench.sim.video import annotate_frame
 
@@ -122,6 +123,40 @@ def plot_tracking_run(res: ScenarioResult, out: Path, stem: str) -> list[str]:
     a3.scatter([f[0]], [f[1]], [f[2]], c="k", s=30)
     a3.set(title="scope axes (green start, red end), fulcrum", xlabel="x (mm)", ylabel="y (mm)", zlabel="z (mm)")
     return [_save(fig, out / f"{stem}.png")]
+
+
+def cue_columns(trace: object) -> tuple[list[str], list[str]]:
+    """The cue wrench columns (``cue:<name>``) and telemetry columns (``cue:<name>.<field>``) of a trace."""
+    names = [k for k in getattr(trace, "columns", {}) if k.startswith("cue:")]
+    return [k for k in names if "." not in k], [k for k in names if "." in k]
+
+
+def plot_cues(res: ScenarioResult, out: Path, stem: str) -> list[str]:
+    """Every cue's force |F| (and its telemetry, if it has any), one row per run: whatever cues the
+    configuration ran, with no code per cue."""
+    runs = [r for r in res.runs if cue_columns(r.trace)[0]][:6]
+    if not runs:
+        return []
+    with_telemetry = any(cue_columns(r.trace)[1] for r in runs)
+    fig, axes = plt.subplots(len(runs), 2 if with_telemetry else 1, figsize=(13 if with_telemetry else 9,
+                             2.6 * len(runs)), squeeze=False)
+    for row, run in zip(axes, runs, strict=True):
+        tr = run.trace
+        t = tr["t"]
+        wrenches, telemetry = cue_columns(tr)
+        for key in wrenches:
+            row[0].plot(t, np.linalg.norm(tr[key][:, 3:], axis=1), label=key.removeprefix("cue:"), lw=1)
+        row[0].set(ylabel="|F| (N)", title=f"{res.name} / {run.label}: every cue's force")
+        row[0].legend(fontsize=7, ncol=3)
+        if with_telemetry:
+            for key in telemetry:
+                row[1].plot(t, tr[key], label=key.removeprefix("cue:"), lw=1)
+            row[1].set(title="cue telemetry")
+            if telemetry:
+                row[1].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    return [_save(fig, out / f"{stem}_cues.png")]
 
 
 def plot_hard_push(res: ScenarioResult, out: Path) -> list[str]:
@@ -240,6 +275,9 @@ def write_report(out: Path, results: dict[str, ScenarioResult], meta: dict, figu
             "",
         ]
         L += [f"![{name}]({f})" for f in figures.get(name, [])] + [""]
+    for name in cue_scenarios.SCENARIOS:  # the cues beyond the paper (zoom, keep-out)
+        if name in results:
+            L += cue_scenarios.report_lines(name, results[name], figures.get(name, []))
     if "hard-push" in results:
         L += _hard_push_section(results["hard-push"], figures.get("hard-push", []))
     if meta.get("printed_damping_check"):

@@ -22,6 +22,7 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.robot.arms import arm_spec
+from lapwrench.sim import cue_scenarios
 from lapwrench.sim.hard_push import hard_push as run_hard_push
 from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, run_metrics
@@ -316,6 +317,7 @@ SCENARIOS: dict[str, Callable[[Config, ScenarioOptions], ScenarioResult]] = {
     "needle-search": needle_search,
     "workflow": workflow,
     "hard-push": hard_push,
+    **cue_scenarios.SCENARIOS,  # zoom, keep-out: the two cues beyond the paper, through the plugin API
 }
 FRANKA_TUNED = ("hard-push",)
 """Scenarios whose pushes and targets are tuned for the Franka arms: left out on the simulation-only arms."""
@@ -328,5 +330,6 @@ def scenarios_for(kind: str) -> tuple[str, ...]:
 
 
 # hard-push: 28 runs of 1.5 s push + 1 s settling (lapwrench.sim.hard_push.total_sim_seconds())
-SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0, "hard-push": 70.0}
+SIM_SECONDS = {"grip": 50.0, "rcm-disturbance": 24.0, "needle-search": 26.0, "workflow": 40.0, "hard-push": 70.0,
+               **cue_scenarios.SIM_SECONDS}
 

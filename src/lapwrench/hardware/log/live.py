@@ -90,3 +90,39 @@ class LiveServer:
 
     def stop(self) -> None:
         self.server.stop()
+
+
+class SimTelemetry:
+    """Streams the cycles of simulated runs to a (live) :class:`~lapwrench.hardware.log.RunLogger`:
+    an observer for :func:`lapwrench.sim.loop.observe_cycles` (``demo --foxglove``, ``ui --foxglove``).
+
+    The simulation runs faster than real time, so one cycle in ``every`` is sent (the events of every
+    cycle are). Each new loop (a scenario, a run of it) continues the log's clock where the previous
+    one ended, so the timeline never runs backwards.
+    """
+
+    def __init__(self, logger: Any, every: int = 10) -> None:
+        if every < 1:
+            raise ValueError("every must be >= 1")
+        self.logger = logger
+        self.every = every
+        self._loop_id: int | None = None
+        self._offset = 0.0
+        self._last = 0.0
+
+    def __call__(self, loop: Any, cycle: Any) -> None:
+        from lapwrench.hardware.log.record import cycle_record
+
+        if id(loop) != self._loop_id:
+            self._loop_id, self._offset = id(loop), self._last
+        t = self._offset + cycle.frame.time
+        self._last = max(self._last, t)
+        for e in cycle.events:
+            self.logger.event(self._offset + e.time, e.kind, e.message)
+        if cycle.k % self.every:
+            return
+        sup = loop.supervisor
+        rec = cycle_record(cycle, sup.state.value, sup.alarm)
+        if rec is not None:
+            rec.t = t
+            self.logger.cycle(rec)
