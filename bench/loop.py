@@ -10,7 +10,10 @@ through shared memory, drains the log ring and waits. Two runs of ``--seconds`` 
 * ``loaded``: a pure-Python busy thread in *this* (the parent) process, plus the detector process
   running the shipped ONNX detector (two passes, 1 thread) at 25 fps on synthetic frames
   (:func:`lapwrench.perception.synthetic.draw_instrument_scene`) published by this process through
-  the shared frame slot, its points going to the loop (``--detector classical`` swaps it).
+  the shared frame slot, its points going to the loop (``--detector classical`` swaps it);
+* ``live``: as idle, with the cycle records shipped to this process and served live to Foxglove
+  (``run --foxglove``: :class:`~lapwrench.hardware.log.RunLogger` with a WebSocket server, no file)
+  and a WebSocket client subscribed to every channel: what live telemetry costs the loop.
 
 Per run: compute time (``readOnce`` return → command ready) p50/p99, the controller tick's own
 p50/p99 and its share of the compute time, deadline misses (compute over ``--budget-us``) and the
@@ -76,7 +79,45 @@ def longest_run(mask: np.ndarray) -> int:
     return best
 
 
-def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
+class LiveClient:
+    """A Foxglove WebSocket client in a thread: subscribes to every advertised channel, counts what arrives."""
+
+    def __init__(self, port: int) -> None:
+        self.port, self.messages, self.bytes = port, 0, 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=lambda: __import__("asyncio").run(self._run()), daemon=True)
+        self.thread.start()
+
+    async def _run(self) -> None:
+        import asyncio
+
+        import websockets
+
+        async with websockets.connect(f"ws://127.0.0.1:{self.port}", subprotocols=["foxglove.sdk.v1"],
+                                      max_size=None) as ws:
+            subscribed: set[int] = set()
+            while not self.stop.is_set():
+                try:
+                    msg = await asyncio.wait_for(ws.recv(), 0.1)
+                except TimeoutError:
+                    continue
+                if isinstance(msg, str):
+                    op = json.loads(msg)
+                    if op.get("op") == "advertise":
+                        new = [c["id"] for c in op["channels"] if c["id"] not in subscribed]
+                        subscribed.update(new)
+                        await ws.send(json.dumps({"op": "subscribe",
+                                                  "subscriptions": [{"id": i, "channelId": i} for i in new]}))
+                elif msg and msg[0] == 0x01:
+                    self.messages += 1
+                    self.bytes += len(msg)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(2.0)
+
+
+def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) -> dict[str, Any]:
     from lapwrench.buffer import LatestValue
     from lapwrench.config import load
     from lapwrench.drivers.tactile import TactileFrame
@@ -113,7 +154,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
             ft=FtSpec("hex", "127.0.0.1", fake.port, tare=False),
             tactile=True,
             instruments=loaded,
-            log_cycles=False,
+            log_cycles=live,
             rt=RtOptions(fifo_priority=a.rt_priority or None, cpus=_cpus(a.rt_cpus), warn=False),
             loop_hook=TickTimer,
         )
@@ -159,6 +200,17 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
         for t in threads:
             t.start()
         ready = rp.start()
+        client = None
+        if live:
+            from lapwrench.hardware.log import RunLogger
+            from lapwrench.robot.model import RobotModel
+
+            logger = RunLogger(None, {"bench": "loop"}, model=RobotModel("fr3"), live=("127.0.0.1", 0))
+            closers.append(logger.close)
+            rp.set_logger(logger)
+            assert logger.live is not None
+            client = LiveClient(logger.live.address[1])
+            closers.append(client.close)
         fake.set_t0(time.monotonic())
         det_frames0 = det.frames_done if det is not None else 0
         t_run = time.monotonic()
@@ -202,6 +254,8 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool) -> dict[str, Any]:
         "frames_published_hz": round(frames_sent[0] / wall, 1) if loaded else None,
         "frankysim_step_p50_us": None if fs is None else round(fs.p50_us, 1),
         "frankysim_realtime_factor_x": None if fs is None else round(fs.realtime_factor, 3),
+        "live_messages_per_s": round(client.messages / wall, 1) if client is not None else None,
+        "live_kbytes_per_s": round(client.bytes / wall / 1e3, 1) if client is not None else None,
         "rt_problems": ready.get("rt_problems"),
         "alarm": st.alarm,
         "stopped_at_rest": st.stopped_at_rest,
@@ -217,7 +271,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=10.0, help="robot seconds per run (>= 10 for the report)")
     ap.add_argument("--budget-us", type=float, default=800.0, help="compute-time budget per cycle (us)")
-    ap.add_argument("--runs", default="idle,loaded", help="which runs, comma-separated: idle, loaded")
+    ap.add_argument("--runs", default="idle,loaded,live", help="which runs, comma-separated: idle, loaded, live")
     ap.add_argument(
         "--detector",
         choices=["onnx", "onnx-flip", "classical"],
@@ -241,7 +295,7 @@ def main() -> int:
         return 2
     runs = {}
     for name in a.runs.split(","):
-        r = one_run(name, a, loaded=name == "loaded")
+        r = one_run(name, a, loaded=name == "loaded", live=name == "live")
         runs[name] = r
         print(
             f"{name:>6}: {r['cycles']} cycles, robot {r['robot_time_s']} s in {r['wall_time_s']} s wall;"

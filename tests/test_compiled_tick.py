@@ -14,9 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lapwrench.compiled_tick import CueError
+from lapwrench.config import Config
+from lapwrench.controller import Controller
 from lapwrench.jit import jit_enabled
-
-pytestmark = pytest.mark.slow  # compiled and uncompiled ticks in subprocesses
+from lapwrench.sensors import RobotReading, SensorFrame
+from lapwrench.spatial import Wrench
+from lapwrench.virtual import home_pose
+from lapwrench.wrenches.base import Cue, TickContext
 
 SCRIPT = Path(__file__).with_name("compiled_ticks.py")
 
@@ -30,6 +35,7 @@ def _run(out: Path, disable_jit: bool, extra: bool) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+@pytest.mark.slow  # compiled and uncompiled ticks in subprocesses
 @pytest.mark.parametrize("extra", [False, True], ids=["one-call", "with-extra-source"])
 def test_compiled_tick_equals_the_interpreted_one(tmp_path: Path, extra: bool) -> None:
     compiled = _run(tmp_path / "jit.npz", disable_jit=False, extra=extra)
@@ -47,3 +53,88 @@ def test_compiled_tick_equals_the_interpreted_one(tmp_path: Path, extra: bool) -
 
 def test_the_jit_is_on_in_the_test_process() -> None:
     assert jit_enabled()
+
+
+# -- what a plugin cue returns is checked ----------------------------------------------------------
+class Hostile(Cue):
+    """A plugin cue returning ``self.value`` (or raising it), with ``self.damping`` as its damping matrix."""
+
+    telemetry_fields = ("x",)
+
+    def __init__(self, cfg: Config, value: object, damping: object = None, telemetry: object = (1.0,)) -> None:
+        super().__init__("hostile", None, cfg)
+        self.value, self.damping, self.values = value, damping, telemetry
+        self.raise_after = 0.0  # s: an exception value is raised from this time on
+
+    def compute(self, ctx: TickContext) -> Wrench:
+        if isinstance(self.value, Exception):
+            if ctx.time >= self.raise_after:
+                raise self.value
+            return Wrench.zero(ctx.geometry.p_G)
+        return self.value  # type: ignore[return-value]
+
+    def damping_matrix(self, ctx: TickContext) -> object:  # type: ignore[override]
+        return self.damping
+
+    def telemetry(self, ctx: TickContext, wrench: Wrench) -> object:  # type: ignore[override]
+        return self.values
+
+
+def _tick_with(cue: Hostile):  # type: ignore[no-untyped-def]
+    ctrl = Controller(cue.cfg, extra_cues=[cue])
+    q0 = home_pose(cue.cfg.robot.kind)
+    ctrl.reset(q0)
+    assert ctrl.ref is not None
+    r = ctrl.tick(SensorFrame(0.0, robot=RobotReading(q0, np.zeros(q0.shape[0]), None, 0.0)))
+    return r, list(ctrl.events)
+
+
+NAN3 = np.array([np.nan, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("value", "damping"),
+    [
+        (Wrench(NAN3, np.zeros(3), np.zeros(3)), None),
+        (Wrench(np.zeros(3), np.full(3, np.inf), np.zeros(3)), None),
+        (Wrench(np.zeros(3), np.ones(3), NAN3), None),
+        (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), np.full((6, 6), np.nan)),
+    ],
+    ids=["nan-moment", "inf-force", "nan-point", "nan-damping"],
+)
+def test_a_non_finite_plugin_output_is_dropped_for_the_tick_and_reported(cfg: Config, value: Wrench,
+                                                                         damping: object) -> None:
+    r, events = _tick_with(Hostile(cfg, value, damping))
+    assert np.all(np.isfinite(r.q_ref)) and np.all(np.isfinite(r.wrenches["hostile"]))
+    assert any(e.source == "cues" and "hostile" in e.message for e in events)
+
+
+@pytest.mark.parametrize(
+    ("value", "damping", "telemetry", "words"),
+    [(np.zeros(6), None, (1.0,), "not a Wrench"),
+     (Wrench(np.zeros(2), np.zeros(3), np.zeros(3)), None, (1.0,), "3-vectors"),
+     (Wrench(np.zeros(3), ["a", "b", "c"], np.zeros(3)), None, (1.0,), "3-vectors"),  # type: ignore[arg-type]
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), np.eye(3), (1.0,), "6 x 6"),
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, (1.0, 2.0), "telemetry values"),
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, ("x",), "numbers")],
+    ids=["array", "short-moment", "text-force", "small-damping", "telemetry-count", "telemetry-text"],
+)
+def test_a_malformed_plugin_output_is_a_cue_error(cfg: Config, value: object, damping: object, telemetry: object,
+                                                  words: str) -> None:
+    with pytest.raises(CueError, match=words):
+        _tick_with(Hostile(cfg, value, damping, telemetry))
+
+
+def test_a_plugin_that_fails_at_once_fails_the_build_before_anything_moves(cfg: Config) -> None:
+    with pytest.raises(ValueError, match="boom"):
+        Controller(cfg, extra_cues=[Hostile(cfg, ValueError("boom"))])  # the warm-up tick runs every cue
+
+
+def test_an_exception_in_a_plugin_reaches_the_loop_which_stops_to_rest(cfg: Config) -> None:
+    from lapwrench.virtual import run_virtual
+
+    cue = Hostile(cfg, ValueError("boom"))
+    cue.raise_after = 0.05
+    ctrl = Controller(cfg, extra_cues=[cue])
+    _, log = run_virtual(cfg, duration=0.2, controller=ctrl)
+    assert log.alarm is not None and "boom" in log.alarm

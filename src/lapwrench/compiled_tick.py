@@ -24,7 +24,7 @@ from lapwrench.motion.reference_shaper import advance_reference
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState, residual_force
 from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
 from lapwrench.sensors import ValidInputs
-from lapwrench.spatial import Mat, Vec, wrench_transform
+from lapwrench.spatial import Mat, Vec, Wrench, wrench_transform
 from lapwrench.tick_core import (
     SaturationInputs,
     fill_saturation_inputs,
@@ -56,6 +56,7 @@ class StageResult(NamedTuple):
     clamped: bool
     at_bound: np.ndarray  # the limit rows (joint box, then envelope) at a bound when saturated
     telemetry: dict[str, tuple[float, ...]]  # the Python cues' telemetry by cue name
+    cue_faults: tuple[str, ...] = ()  # Python cues whose output was dropped this tick
 
 
 class _Extra(NamedTuple):
@@ -65,6 +66,7 @@ class _Extra(NamedTuple):
     task_F: Vec  # summed force of the task-space cues, at p_R
     by_name: dict[str, Vec]  # every Python cue's wrench about p_G
     telemetry: dict[str, tuple[float, ...]]
+    faults: tuple[str, ...]  # cues whose output was dropped this tick (non-finite), and why
 
 
 _F64 = np.dtype(np.float64)
@@ -87,7 +89,7 @@ _ZERO3 = np.zeros(3)
 _NO_TACTILE = np.zeros(64)
 _NO_POINTS = np.zeros((0, 2))
 _NO_ROWS = np.zeros(0, dtype=bool)
-_NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), {}, {})
+_NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), {}, {}, ())
 _NO_TELEMETRY: dict[str, tuple[float, ...]] = {}
 
 
@@ -222,21 +224,28 @@ class CompiledTick:
             ref = (rows[0], rows[1], rows[2]) if saturated else None
         wrenches = {**self._paper_wrenches(o.W_r, o.W_h, o.W_c, o.W_f), **extra.by_name}
         return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, o.W_n, o.tau, o.delta, o.contacts,
-                           o.non_finite, admitted, ref, bool(clamped), at, extra.telemetry)
+                           o.non_finite, admitted, ref, bool(clamped), at, extra.telemetry, extra.faults)
 
     def _evaluate_cues(self, ctx: TickContext) -> _Extra:
         """The Python cues this tick: the null-space wrenches with their points and summed damping, the
-        task-space force at p_R, every wrench about p_G (eq 39) by name, and the telemetry."""
+        task-space force at p_R, every wrench about p_G (eq 39) by name, and the telemetry.
+
+        What a plugin returns is checked: a non-finite wrench or damping matrix is dropped for this tick
+        (zero, and a fault named in ``faults``), like a rejected sensor reading; anything that is not a
+        wrench of 3-vectors, a 6 x 6 matrix or one number per telemetry field is a :class:`CueError`
+        (the loop turns it into an alarm and a stop to rest).
+        """
         p_G = ctx.geometry.p_G
-        null = [c.compute(ctx) for c in self.null_cues]
-        task = [c.compute(ctx) for c in self.task_cues]
+        faults: list[str] = []
+        null = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.null_cues]
+        task = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.task_cues]
         D = np.zeros((6, 6))
         for c in self.null_cues:
             Dc = c.damping_matrix(ctx)
             if Dc is not None:
-                D += Dc
+                D += _checked_damping(c, Dc, faults)
         task_F = np.zeros(3)
-        for w in task:  # a task-space cue acts at p_R through J_R: its force, moved to p_R
+        for w in task:  # a task-space cue acts at p_R through J_R: its force (its moment is not used)
             task_F += w.force
         wrenches = list(zip(self.null_cues + self.task_cues, null + task, strict=True))
         return _Extra(
@@ -244,6 +253,55 @@ class CompiledTick:
             _f64(np.array([w.point for w in null], dtype=float).reshape(-1, 3)),
             D,
             task_F,
-            {c.name: wrench_transform(np.asarray(w.point, dtype=float), p_G) @ w.vector for c, w in wrenches},
-            {c.name: tuple(float(x) for x in c.telemetry(ctx, w)) for c, w in wrenches if c.telemetry_fields},
+            {c.name: wrench_transform(w.point, p_G) @ w.vector for c, w in wrenches},
+            {c.name: _checked_telemetry(c, c.telemetry(ctx, w)) for c, w in wrenches if c.telemetry_fields},
+            tuple(faults),
         )
+
+
+class CueError(RuntimeError):
+    """A cue returned something that is not what the :class:`~lapwrench.wrenches.base.Cue` interface promises."""
+
+
+def _vec3(x: object) -> Vec | None:
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    return a if a.shape == (3,) else None
+
+
+def _checked_wrench(cue: Cue, w: object, p_G: Vec, faults: list[str]) -> Wrench:
+    """``w`` as a wrench of float 3-vectors; a non-finite one becomes zero (and a fault)."""
+    if not isinstance(w, Wrench):
+        raise CueError(f"cue {cue.name!r} returned {type(w).__name__}, not a Wrench")
+    moment, force, point = _vec3(w.moment), _vec3(w.force), _vec3(w.point)
+    if moment is None or force is None or point is None:
+        raise CueError(f"cue {cue.name!r} returned a Wrench whose moment, force and point are not 3-vectors")
+    if not (np.isfinite(moment).all() and np.isfinite(force).all() and np.isfinite(point).all()):
+        faults.append(f"cue {cue.name!r}: non-finite wrench; dropped this tick")
+        return Wrench.zero(p_G)
+    return Wrench(moment, force, point)
+
+
+def _checked_damping(cue: Cue, D: object, faults: list[str]) -> Mat:
+    try:
+        a = np.asarray(D, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (6, 6):
+        raise CueError(f"cue {cue.name!r}: damping_matrix must be 6 x 6, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        faults.append(f"cue {cue.name!r}: non-finite damping matrix; dropped this tick")
+        return np.zeros((6, 6))
+    return a
+
+
+def _checked_telemetry(cue: Cue, values: object) -> tuple[float, ...]:
+    try:
+        out = tuple(float(x) for x in values)  # type: ignore[union-attr]
+    except (TypeError, ValueError) as exc:
+        raise CueError(f"cue {cue.name!r}: telemetry must be numbers ({exc})") from exc
+    if len(out) != len(cue.telemetry_fields):
+        raise CueError(f"cue {cue.name!r}: {len(out)} telemetry values for fields {cue.telemetry_fields}")
+    return out

@@ -213,6 +213,8 @@ class Controller:
         self.delta, self.contacts = r.delta, r.contacts
         if r.non_finite:
             self._report([InputEvent(frame.time, "controller", "non-finite torque; braking")])
+        if r.cue_faults:
+            self._report([InputEvent(frame.time, "cues", msg) for msg in r.cue_faults])
 
         # 7. limits and envelope met by the lower-priority motion only (motion/saturation.py) → command
         if r.admitted:  # the desired acceleration met every limit: nothing to saturate (the common case)
