@@ -245,3 +245,18 @@ def test_a_detector_failing_during_the_run_leaves_failed_txt(
     failed = (out / "FAILED.txt").read_text()
     assert "inference failed" in failed and "ModelError" in failed
     assert not (out / "report.md").exists()
+
+
+def test_demo_refuses_a_foxglove_port_in_use_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        code, err = run_cli(["demo", "--scenarios", "grip", "--foxglove", f"127.0.0.1:{port}", "--out",
+                             str(tmp_path / "out")], capsys)
+    assert code == 2 and f"--foxglove cannot listen on 127.0.0.1:{port}" in err and err.count("\n") == 1
+    assert not (tmp_path / "out" / "report.md").exists()

@@ -9,7 +9,6 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +20,6 @@ from lapwrench.cli_types import (
     float_in,
     host_port,
     int_in,
-    listen_problem,
     output_dir,
 )
 
@@ -120,33 +118,17 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     return 0
 
 
-@contextlib.contextmanager
-def live_telemetry(address: tuple[str, int] | None, robot: str, command: str) -> Iterator[None]:
-    """With an address: every simulated cycle (decimated) served live to Foxglove while the block runs
-    (:class:`~lapwrench.hardware.log.live.SimTelemetry`); without one, nothing."""
+def _live(address: tuple[str, int] | None, robot: str, command: str) -> contextlib.AbstractContextManager[object]:
+    """Live telemetry of the simulated runs while the block runs (nothing without an address); a port
+    that cannot be served is a usage error, before anything runs."""
     if address is None:
-        yield
-        return
-    from lapwrench.hardware.log import RunLogger
-    from lapwrench.hardware.log.live import LiveError, SimTelemetry
-    from lapwrench.robot.model import RobotModel
-    from lapwrench.sim.loop import observe_cycles
+        return contextlib.nullcontext()
+    from lapwrench.hardware.log.live import LiveError, live_simulation
 
-    problem = listen_problem(*address)
-    if problem:
-        raise UsageError(f"--foxglove {problem}")
     try:
-        logger = RunLogger(None, {"command": command, "robot": robot}, model=RobotModel(robot), live=address)
+        return live_simulation(address, robot, f"lapwrench {command}")
     except LiveError as exc:
         raise UsageError(f"--foxglove {exc}") from exc
-    assert logger.live is not None
-    host, port = logger.live.address
-    print(f"lapwrench {command}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
-    try:
-        with observe_cycles(SimTelemetry(logger)):
-            yield
-    finally:
-        logger.close()
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -170,7 +152,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except DemoError as exc:  # a bad argument or input file, found before anything ran
         raise UsageError(str(exc)) from exc
     try:
-        with live_telemetry(args.foxglove, plan.robot, "demo"):
+        with _live(args.foxglove, plan.robot, "demo"):
             results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:  # a run that failed (FAILED.txt says why)
         print(f"lapwrench demo: {exc}", file=sys.stderr)

@@ -15,7 +15,9 @@ Open Foxglove, "Open connection", ``ws://127.0.0.1:8765``, then import the layou
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -126,3 +128,35 @@ class SimTelemetry:
         if rec is not None:
             rec.t = t
             self.logger.cycle(rec)
+
+
+class live_simulation(contextlib.AbstractContextManager["live_simulation"]):  # noqa: N801 (used as a function)
+    """Every simulated cycle (decimated, :class:`SimTelemetry`) served live to Foxglove on ``address``
+    while the ``with`` block runs: ``demo --foxglove`` and ``ui --foxglove``. The server starts here
+    (LiveError, one line, if it cannot: the port taken, the host unknown) and says where it listens on
+    stderr, prefixed with ``who``."""
+
+    def __init__(self, address: LiveAddress, robot: str, who: str) -> None:
+        from lapwrench.cli_types import listen_problem
+        from lapwrench.hardware.log.writer import RunLogger
+        from lapwrench.robot.model import RobotModel
+        from lapwrench.sim.loop import observe_cycles
+
+        problem = listen_problem(*address)
+        if problem:
+            raise LiveError(problem)
+        self.logger = RunLogger(None, {"command": who, "robot": robot}, model=RobotModel(robot), live=address)
+        assert self.logger.live is not None
+        host, port = self.logger.live.address
+        print(f"{who}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
+        self._observing = observe_cycles(SimTelemetry(self.logger))
+
+    def __enter__(self) -> live_simulation:
+        self._observing.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            self._observing.__exit__(*exc)  # type: ignore[arg-type]
+        finally:
+            self.logger.close()
