@@ -123,7 +123,8 @@ def _live(address: tuple[str, int] | None, robot: str, command: str) -> contextl
     that cannot be served is a usage error, before anything runs."""
     if address is None:
         return contextlib.nullcontext()
-    from lapwrench.hardware.log.live import LiveError, live_simulation
+    from lapwrench.hardware.log.live import LiveError
+    from lapwrench.hardware.log.live_sim import live_simulation
 
     try:
         return live_simulation(address, robot, f"lapwrench {command}")

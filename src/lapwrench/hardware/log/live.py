@@ -15,9 +15,7 @@ Open Foxglove, "Open connection", ``ws://127.0.0.1:8765``, then import the layou
 
 from __future__ import annotations
 
-import contextlib
 import math
-import sys
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -92,71 +90,3 @@ class LiveServer:
 
     def stop(self) -> None:
         self.server.stop()
-
-
-class SimTelemetry:
-    """Streams the cycles of simulated runs to a (live) :class:`~lapwrench.hardware.log.RunLogger`:
-    an observer for :func:`lapwrench.sim.loop.observe_cycles` (``demo --foxglove``, ``ui --foxglove``).
-
-    The simulation runs faster than real time, so one cycle in ``every`` is sent (the events of every
-    cycle are). Each new loop (a scenario, a run of it) continues the log's clock where the previous
-    one ended, so the timeline never runs backwards.
-    """
-
-    def __init__(self, logger: Any, every: int = 10) -> None:
-        if every < 1:
-            raise ValueError("every must be >= 1")
-        self.logger = logger
-        self.every = every
-        self._loop_id: int | None = None
-        self._offset = 0.0
-        self._last = 0.0
-
-    def __call__(self, loop: Any, cycle: Any) -> None:
-        from lapwrench.hardware.log.record import cycle_record
-
-        if id(loop) != self._loop_id:
-            self._loop_id, self._offset = id(loop), self._last
-        t = self._offset + cycle.frame.time
-        self._last = max(self._last, t)
-        for e in cycle.events:
-            self.logger.event(self._offset + e.time, e.kind, e.message)
-        if cycle.k % self.every:
-            return
-        sup = loop.supervisor
-        rec = cycle_record(cycle, sup.state.value, sup.alarm)
-        if rec is not None:
-            rec.t = t
-            self.logger.cycle(rec)
-
-
-class live_simulation(contextlib.AbstractContextManager["live_simulation"]):  # noqa: N801 (used as a function)
-    """Every simulated cycle (decimated, :class:`SimTelemetry`) served live to Foxglove on ``address``
-    while the ``with`` block runs: ``demo --foxglove`` and ``ui --foxglove``. The server starts here
-    (LiveError, one line, if it cannot: the port taken, the host unknown) and says where it listens on
-    stderr, prefixed with ``who``."""
-
-    def __init__(self, address: LiveAddress, robot: str, who: str) -> None:
-        from lapwrench.cli_types import listen_problem
-        from lapwrench.hardware.log.writer import RunLogger
-        from lapwrench.robot.model import RobotModel
-        from lapwrench.sim.loop import observe_cycles
-
-        problem = listen_problem(*address)
-        if problem:
-            raise LiveError(problem)
-        self.logger = RunLogger(None, {"command": who, "robot": robot}, model=RobotModel(robot), live=address)
-        assert self.logger.live is not None
-        host, port = self.logger.live.address
-        print(f"{who}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
-        self._observing = observe_cycles(SimTelemetry(self.logger))
-
-    def __enter__(self) -> live_simulation:
-        self._observing.__enter__()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        try:
-            self._observing.__exit__(*exc)  # type: ignore[arg-type]
-        finally:
-            self.logger.close()
