@@ -41,6 +41,15 @@ case "$cmd" in
         ;;
     test)
         setup
+        # the browser test of `lapwrench ui` drives Debian's headless Chromium (no browser download at run time)
+        if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
+            if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+                echo "[lapwrench] installing chromium + chromium-driver for the browser test ..." >&2
+                (apt-get update -qq && apt-get install -y -qq chromium chromium-driver) >&2
+            else
+                echo "[lapwrench] warning: chromium/chromedriver missing; the browser test will be skipped" >&2
+            fi
+        fi
         "$VENV/bin/ruff" check src tests bench
         exec "$VENV/bin/python" -m pytest -q "$@"
         ;;

@@ -62,17 +62,6 @@ UNTESTED: dict[str, str] = {
     "robot/arms/ur5.py": "arm data: tests/robot/test_arms.py",
     "robot/arms/xarm7.py": "arm data: tests/robot/test_arms.py",
     "robot_kinds.py": "the robot-kind names: tests/robot/test_arms.py",
-    # the live UI, being written alongside issue 13 (its tests were not in yet)
-    "ui/app.py": "the live UI",
-    "ui/controls.py": "the live UI",
-    "ui/history.py": "the live UI",
-    "ui/inputs.py": "the live UI",
-    "ui/params.py": "the live UI",
-    "ui/plots.py": "the live UI",
-    "ui/runner.py": "the live UI",
-    "ui/scene.py": "the live UI",
-    "ui/session.py": "the live UI",
-    "ui/view.py": "the live UI",
 }
 
 # Test files that are not about one module (tests/README.md says why).

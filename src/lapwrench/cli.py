@@ -254,6 +254,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp = sub.add_parser(name, help=helptext)
         add(sp)
         sp.set_defaults(func=func)
+    from lapwrench.ui.cli import add_ui_parser
+
+    add_ui_parser(sub)
     return p
 
 

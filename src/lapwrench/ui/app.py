@@ -1,0 +1,152 @@
+"""The page: a viser server showing and steering a :class:`~lapwrench.ui.session.Session`.
+
+Three threads besides viser's own: the sim thread (:class:`~lapwrench.ui.runner.RealTimeRunner`,
+the 1 kHz ticks at wall-clock pace), the view thread (:class:`~lapwrench.ui.view.LaparoscopeView`,
+the laparoscope frames) and the page thread (:meth:`UiApp.run_forever` or :meth:`UiApp.start`),
+which draws the latest snapshot into the scene at :data:`PAGE_HZ`, refreshes the plots at
+:data:`PLOT_HZ` and the status line. The page thread never steps the simulation, so a slow browser
+slows the page, not the control loop.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lapwrench.config import Config
+from lapwrench.ui.controls import Controls
+from lapwrench.ui.params import ParamsPanel
+from lapwrench.ui.plots import LivePlots, plot_specs
+from lapwrench.ui.runner import RealTimeRunner
+from lapwrench.ui.scene import SceneDrawer, cue_color
+from lapwrench.ui.session import Session
+from lapwrench.ui.view import LaparoscopeView, view_size
+
+PAGE_HZ = 20.0  # scene updates per second
+PLOT_HZ = 4.0  # status line and plot refreshes per second
+KEEPING_UP = 0.95  # real-time factor below which the view lowers its frame rate
+
+
+@dataclass(frozen=True)
+class UiOptions:
+    """How the page runs: where it listens, the session's seed and detector, the view's frame rate."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    seed: int = 0
+    detector: str = "projected"
+    view_fps: float = 25.0
+    view_scale: float = 0.5  # the view is rendered at this fraction of the camera's 640 x 480
+
+
+class UiApp:
+    """The viser server with the session, the runner, the view and the page's panels."""
+
+    def __init__(self, cfg: Config, options: UiOptions | None = None) -> None:
+        import viser
+
+        self.options = opts = options or UiOptions()
+        self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
+        self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
+        self.server = viser.ViserServer(host=opts.host, port=opts.port, label="lapwrench", verbose=False)
+        self.server.initial_camera.position = (1.25, -0.75, 0.85)
+        self.server.initial_camera.look_at = (0.5, 0.0, 0.3)
+        world = self.session.closed.world
+        self.scene = SceneDrawer(self.server, world.model, world.data)
+        names = [c.name for c in self.session.closed.controller.cues]
+        self.cue_colors = {n: cue_color(n, i) for i, n in enumerate(names)}
+        gui = self.server.gui
+        self.controls = Controls(self.server, self.session, self.runner)
+        self.params = ParamsPanel(gui, self.session)
+        panel = gui.add_panel()  # the view and the plots in a column of their own, left of the scene
+        with panel.add_tab("Laparoscope view and live plots"):
+            width, height = view_size(self.session.cfg, opts.view_scale)
+            self.image = gui.add_image(np.zeros((height, width, 3), np.uint8), format="jpeg", jpeg_quality=80)
+            self.plots = LivePlots(gui, self.session.history, plot_specs(names, self.cue_colors))
+        panel.dock_left()
+        panel.set_width(400)
+        self.view = LaparoscopeView(self.session, fps=opts.view_fps, scale=opts.view_scale,
+                                    keeping_up=lambda: not self.runner.rtf < KEEPING_UP)
+        self.session.on_tick.append(self.view.on_tick)
+        self.page_frames = 0
+        self._shown_frame = -1
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    @property
+    def port(self) -> int:
+        return int(self.server.get_port())
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.options.host}:{self.port}"
+
+    # -- life cycle ---------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the sim, the view and the page threads; returns at once."""
+        self.runner.start()
+        self.view.start()
+        self._thread = threading.Thread(target=self._page_loop, name="lapwrench-ui-page", daemon=True)
+        self._thread.start()
+
+    def run_forever(self) -> None:
+        """Start, then wait until interrupted (Ctrl-C), then stop."""
+        self.start()
+        try:
+            while not self._stop.is_set():
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.runner.stop()
+        self.view.stop()
+        if self._thread is not None:
+            self._thread.join(5.0)
+        self.server.stop()
+        self.session.closed.world.close()
+
+    # -- the page thread ----------------------------------------------------------------------
+    def _page_loop(self) -> None:
+        period, plot_every = 1.0 / PAGE_HZ, max(1, round(PAGE_HZ / PLOT_HZ))
+        k = 0
+        while not self._stop.is_set():
+            t0 = time.perf_counter()
+            try:
+                self.draw(slow=k % plot_every == 0)
+            except Exception as exc:  # a drawing bug must not take the server down: show it
+                self.controls.show_error(f"page update: {type(exc).__name__}: {exc}")
+            k += 1
+            time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+
+    def draw(self, slow: bool = True) -> None:
+        """One page update: the scene and the view image; with ``slow``, the status line and the plots
+        too (each a React re-render on the page, costly on a software-rendered browser)."""
+        snap = self.session.snapshot
+        if snap is not None:
+            with self.server.atomic():
+                self.scene.update(snap, self.cue_colors)
+        if self.view.frames != self._shown_frame and self.view.image is not None:
+            self._shown_frame = self.view.frames
+            self.image.image = self.view.image
+        if snap is not None:
+            self.controls.follow_handle(snap)
+        if slow:
+            self.controls.refresh(snap, self.view.measured_fps)
+            if self.view.error:
+                self.controls.show_error(self.view.error)
+            self.params.show_applied()
+            self.plots.refresh()
+        self.page_frames += 1
+
+    def stats(self) -> dict[str, Any]:
+        """Figures for the command line and the tests: real-time factor, per-tick wall time, view fps."""
+        return {"rtf": self.runner.rtf, "tick_ms": self.runner.step_seconds * 1e3,
+                "view_fps": self.view.measured_fps, "sim_time": self.session.time}

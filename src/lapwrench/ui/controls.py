@@ -1,0 +1,179 @@
+"""The page's controls: the status line, hand-guiding, instruments and scenario buttons.
+
+Every callback goes through :meth:`Controls.guarded`: a bad value (NaN from a slider, an unknown
+choice) or any other failure is shown on the page's error line and never reaches the sim thread.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from lapwrench.ui.inputs import GIZMO_STIFFNESS, GRIP_LEVELS, MAX_DELTA, MAX_HAND_FORCE, MAX_HAND_TORQUE, UiInputError
+from lapwrench.ui.runner import RealTimeRunner
+from lapwrench.ui.session import DETECTORS, INSTRUMENT_REACH, Session, Snapshot
+
+
+def status_text(snapshot: Snapshot | None, rtf: float, paused: bool, view_fps: float) -> str:
+    """The status line: time, real-time factor, mode, grip gain, RCM error, holds and alarms."""
+    if snapshot is None:
+        return "starting…"
+    speed = "paused" if paused else f"{rtf:.2f}× real time" if np.isfinite(rtf) else "…"
+    fps = f"{view_fps:.0f} fps" if np.isfinite(view_fps) else "… fps"
+    held = f" · **HELD: {snapshot.held}**" if snapshot.held else ""
+    extra = "".join([" · incision shifted" if snapshot.disturbance else "",
+                     " · scripted hand" if snapshot.script else ""])
+    alarms = f"\n\nalarms: {'; '.join(snapshot.alarms)}" if snapshot.alarms else ""
+    return (f"t = {snapshot.t:.2f} s · {speed} · view {fps} · mode **{snapshot.mode}** · δ = {snapshot.delta:.2f}"
+            f" · RCM error {snapshot.rcm_error_mm:.2f} mm{held}{extra}{alarms}")
+
+
+class Controls:
+    """Builds the controls in ``gui`` and wires them to the session and the runner."""
+
+    def __init__(self, server: Any, session: Session, runner: RealTimeRunner) -> None:
+        self.server = server
+        self.session = session
+        self.runner = runner
+        gui = server.gui
+        self.status = gui.add_markdown("starting…")
+        self.error = gui.add_markdown("")
+        self.resume_button = gui.add_button("Resume after hold", visible=False)
+        self.resume_button.on_click(self.guarded(lambda _e: session.resume()))
+        self.dragging = False
+        self._build_hand(gui)
+        self._build_instruments(gui)
+        self._build_scenarios(gui)
+        self.gizmo = server.scene.add_transform_controls("/handle_gizmo", scale=0.12, disable_rotations=True)
+        self.gizmo.on_update(self.guarded(self._on_gizmo))
+
+    def guarded(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """``fn`` with its errors shown on the page instead of raised."""
+        def call(event: Any) -> None:
+            try:
+                fn(event)
+            except UiInputError as exc:
+                self.show_error(str(exc))
+            except Exception as exc:  # never let the page's input crash the server
+                self.show_error(f"{type(exc).__name__}: {exc}")
+            else:
+                self.show_error("")
+        return call
+
+    def show_error(self, message: str) -> None:
+        text = f"**Error:** {message}" if message else ""
+        if text != self.error.content:
+            self.error.content = text
+
+    # -- hand ---------------------------------------------------------------------------------
+    def _build_hand(self, gui: Any) -> None:
+        hand = self.session.hand
+        with gui.add_folder("Hand on the handle"):
+            self.grip = gui.add_button_group("grip", tuple(GRIP_LEVELS))
+            self.delta = gui.add_slider("grip δ", 0.0, MAX_DELTA, 0.05, 0.0)
+            self.azimuth = gui.add_slider("push direction (deg)", -180.0, 180.0, 5.0, 0.0)
+            self.magnitude = gui.add_slider("push (N)", 0.0, MAX_HAND_FORCE, 0.5, 0.0)
+            self.torque = gui.add_slider("torque about shaft (N m)", -MAX_HAND_TORQUE, MAX_HAND_TORQUE, 0.05, 0.0)
+            self.release = gui.add_button("Let go")
+            gui.add_markdown(f"Drag the gizmo at the handle: {GIZMO_STIFFNESS / 100:.0f} N per cm, at most "
+                             f"{MAX_HAND_FORCE:.0f} N. Arrows: hand red, trocar orange, cues by colour.")
+        self.grip.on_click(self.guarded(lambda e: hand.set_grip_level(e.target.value)))
+        k_H = lambda: self.session.cfg.interaction.k_H  # noqa: E731 - read when used: parameters change
+        self.delta.on_update(self.guarded(lambda e: hand.set_grip_delta(e.target.value, k_H())))
+        push = self.guarded(lambda _e: hand.set_push(self.azimuth.value, self.magnitude.value))
+        self.azimuth.on_update(push)
+        self.magnitude.on_update(push)
+        self.torque.on_update(self.guarded(lambda e: hand.set_twist(e.target.value)))
+        self.release.on_click(self.guarded(lambda _e: self._let_go()))
+
+    def _let_go(self) -> None:
+        self.session.hand.release()
+        self.magnitude.value = 0.0
+        self.torque.value = 0.0
+        self.delta.value = 0.0
+
+    def _on_gizmo(self, event: Any) -> None:
+        snap = self.session.snapshot
+        if event.phase == "end" or snap is None:
+            self.dragging = False
+            self.session.hand.set_gizmo(np.zeros(3))
+            return
+        self.dragging = True
+        self.session.hand.set_gizmo(np.asarray(event.target.position, float) - snap.hand_point)
+
+    def follow_handle(self, snapshot: Snapshot) -> None:
+        """Keep the gizmo on the handle while it is not dragged; while dragged, its pull follows the
+        handle (a spring between the handle and the gizmo)."""
+        if not self.dragging:
+            if np.max(np.abs(np.asarray(self.gizmo.position) - snapshot.hand_point)) > 1e-4:
+                self.gizmo.position = snapshot.hand_point
+        else:
+            self.session.hand.set_gizmo(np.asarray(self.gizmo.position, float) - snapshot.hand_point)
+
+    # -- instruments --------------------------------------------------------------------------
+    def _build_instruments(self, gui: Any) -> None:
+        r = INSTRUMENT_REACH
+        self.instrument_inputs: list[tuple[Any, Any, Any]] = []
+        with gui.add_folder("Instruments", expand_by_default=False):
+            for i, name in enumerate(("left", "right")[: len(self.session.instruments)]):
+                shown = gui.add_checkbox(f"show {name} instrument", False)
+                x = gui.add_slider(f"{name} x (m)", -r, r, 0.002, 0.0)
+                y = gui.add_slider(f"{name} y (m)", -r, r, 0.002, 0.0)
+                update = self.guarded(lambda _e, i=i, s=shown, x=x, y=y: self.session.set_instrument(
+                    i, s.value, x.value, y.value))
+                for h in (shown, x, y):
+                    h.on_update(update)
+                self.instrument_inputs.append((shown, x, y))
+            self.detector = gui.add_dropdown("detector (resets)", DETECTORS, initial_value=self.session.detector)
+        self.detector.on_update(self.guarded(lambda e: self._in_background(
+            lambda: self._reset(detector=e.target.value))))
+
+    # -- scenarios ----------------------------------------------------------------------------
+    def _build_scenarios(self, gui: Any) -> None:
+        with gui.add_folder("Scenarios"):
+            self.shift = gui.add_checkbox("shift the incision 10 mm (Fig. 5)", False)
+            self.play = gui.add_button("Play Fig. 4: turn the view 10° at this grip")
+            self.pause = gui.add_button("Pause")
+            self.reset = gui.add_button("Reset")
+        self.shift.on_update(self.guarded(lambda e: self.session.set_disturbance(bool(e.target.value))))
+        self.play.on_click(self.guarded(lambda _e: self.session.play_view_adjustment()))
+        self.pause.on_click(self.guarded(lambda _e: self._toggle_pause()))
+        self.reset.on_click(self.guarded(lambda _e: self._in_background(self._reset)))
+
+    def _toggle_pause(self) -> None:
+        self.runner.paused = not self.runner.paused
+        self.pause.label = "Play" if self.runner.paused else "Pause"
+
+    def _reset(self, detector: str | None = None) -> None:
+        self.status.content = "resetting…"
+        self.session.reset(detector=detector)
+        self.shift.value = False
+        for i, (shown, x, y) in enumerate(self.instrument_inputs):
+            self.session.set_instrument(i, shown.value, x.value, y.value)
+        self.runner.clear_error()
+        self.pause.label = "Pause"
+
+    def _in_background(self, fn: Callable[[], None]) -> None:
+        """Run a slow action (a reset builds a new world) off the page's callback thread."""
+        def run() -> None:
+            try:
+                fn()
+            except Exception as exc:  # shown on the page
+                self.show_error(f"{type(exc).__name__}: {exc}")
+        threading.Thread(target=run, name="lapwrench-ui-reset", daemon=True).start()
+
+    # -- every page frame ---------------------------------------------------------------------
+    def refresh(self, snapshot: Snapshot | None, view_fps: float) -> None:
+        """The status line, the resume button and errors from the sim thread (the gizmo follows the
+        handle in :meth:`follow_handle`, called more often)."""
+        text = status_text(snapshot, self.runner.rtf, self.runner.paused, view_fps)
+        if text != self.status.content:
+            self.status.content = text
+        held = snapshot is not None and snapshot.held is not None
+        if self.resume_button.visible != held:
+            self.resume_button.visible = held
+        for message in self.session.pending_errors() + ([self.runner.error] if self.runner.error else []):
+            self.show_error(message)

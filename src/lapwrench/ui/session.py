@@ -1,0 +1,384 @@
+"""The simulated session behind the page: one :class:`~lapwrench.sim.loop.ClosedLoop` (world, simulated
+sensors, controller, safety supervisor, through the one control loop), stepped one 1 ms tick at a time.
+
+Threads: the runner (:mod:`lapwrench.ui.runner`) calls :meth:`Session.step`; the page's callbacks
+only write the inputs (:attr:`Session.hand`, :attr:`Session.instruments`) or queue a request (a
+parameter change, a reset, a resume) that the next tick carries out, all under :attr:`Session.lock`.
+What the page draws comes from a :class:`Snapshot` taken every few ticks and from the
+:class:`~lapwrench.ui.history.History`.
+
+After every tick, each callable in :attr:`Session.on_tick` runs in the sim thread with the session
+and the tick's result (``None`` while the supervisor holds the arm): the seam for a telemetry
+publisher (and the laparoscope view's frame copy). Keep it short: it runs inside the real-time loop.
+
+A hold (a supervisor alarm) keeps the world running with the arm held; :meth:`Session.resume`
+restarts the control loop at the measured pose, the RCM point kept where the shaft meets it.
+A parameter change (:meth:`Session.request_config`) builds a new controller at once and swaps it in at
+the next tick at which the arm is at rest (or on resume), restarting the loop the same way.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lapwrench.config import Config
+from lapwrench.controller import Controller, TickResult
+from lapwrench.robot.description import FRAME_C, FRAME_H
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
+from lapwrench.sim.loop import ClosedLoop, SafetyStopError
+from lapwrench.sim.scenarios import TISSUE_DEPTH
+from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, rotate_axis
+from lapwrench.sim.world import CONTROL_DT
+from lapwrench.ui.history import History, mode_index
+from lapwrench.ui.inputs import HandInput, UiInputError, checked_choice, checked_number
+
+DETECTORS = ("projected", "shipped")
+"""Instrument detectors offered on the page: projected simulator geometry (cheap) or the shipped YOLO."""
+SAMPLE_EVERY = 20  # ticks between plotted samples (50 Hz)
+SNAPSHOT_EVERY = 10  # ticks between snapshots for the page (100 Hz; the page draws at its own rate)
+AT_REST_SPEED = 0.02  # rad/s: every joint slower than this counts as at rest for a parameter change
+INSTRUMENT_REACH = 0.08  # m, how far from the tissue point below the incision an instrument tip may go
+SHIFT = (0.0, 0.01)  # m, the Fig. 5 housing shift
+KEPT_RECORDS = 10_000  # the closed loop's per-tick lists are trimmed to this many
+
+
+class NoRenderCamera:
+    """The camera clock of a run whose detector ignores the image (projected geometry): frames are
+    'captured' at ``fps`` without rendering, so the detection timing is the real one and the page's
+    view renders on its own thread (:mod:`lapwrench.ui.view`)."""
+
+    def __init__(self, fps: float) -> None:
+        self.fps = float(fps)
+        self.frame = np.zeros((1, 1, 3), np.uint8)
+        self.stamp = -np.inf
+
+    def capture(self, t: float) -> bool:
+        if t + 1e-9 >= self.stamp + 1.0 / self.fps:
+            self.stamp = t
+            return True
+        return False
+
+
+def build_loop(cfg: Config, seed: int, detector: str) -> ClosedLoop:
+    """A closed loop with ``detector`` (one of :data:`DETECTORS`). With ``projected`` nothing is rendered
+    in the loop (see :class:`NoRenderCamera`); the shipped YOLO model detects on rendered frames."""
+    checked_choice(detector, "detector", DETECTORS)
+    closed = ClosedLoop(cfg, seed=seed, camera=True, detector=detector)
+    if detector == "projected":
+        assert closed.camera is not None
+        closed.camera = NoRenderCamera(closed.camera.fps)  # type: ignore[assignment]
+    for i in range(closed.world.n_instruments):
+        park_instrument(closed, i)
+    return closed
+
+
+def park_instrument(closed: ClosedLoop, index: int) -> None:
+    """Withdraw instrument ``index`` into its port (out of the view), as the scenarios do."""
+    w = closed.world
+    w.set_instrument_tip(index, w.port_position(index) + np.array([0.0, 0.0, -0.02]))
+
+
+def rcm_on_axis(closed: ClosedLoop) -> np.ndarray | None:
+    """The controller's RCM point moved onto the shaft axis (None before the first start)."""
+    p_E, d = closed.world.shaft_axis()
+    rcm = closed.controller.rcm
+    return None if rcm is None else p_E + float((rcm.p_R - p_E) @ d) * d
+
+
+def restart_loop(closed: ClosedLoop, p_R: np.ndarray | None) -> None:
+    """Restart the control loop at the measured pose: the controller reset at rest with RCM point
+    ``p_R`` (see :func:`rcm_on_axis`), supervision restarted, and the session time kept equal to the
+    simulated time."""
+    closed.loop.start(p_R)
+    closed.loop.t0 = 0.0  # session time = simulated time, as the sources and the detector count it
+
+
+@dataclass
+class InstrumentTarget:
+    """Where the page wants an instrument: shown at (x, y) m from the tissue point below the incision,
+    or withdrawn into its port."""
+
+    visible: bool = False
+    x: float = 0.0
+    y: float = 0.0
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the page draws, taken in the sim thread (vectors in {B}, SI units)."""
+
+    t: float
+    mode: str
+    delta: float
+    held: str | None
+    alarms: tuple[str, ...]
+    body_pos: np.ndarray
+    body_quat: np.ndarray
+    hand_point: np.ndarray
+    hand_force: np.ndarray
+    cue_forces: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (point, force)
+    trocar_force: np.ndarray
+    incision: np.ndarray
+    p_R: np.ndarray
+    shaft_dir: np.ndarray
+    rcm_error_mm: float
+    disturbance: bool
+    script: bool
+    pending_config: bool
+    detections: tuple[tuple[tuple[float, float, float, float], tuple[float, float]], ...] = ()
+
+
+@dataclass
+class _Requests:
+    config: tuple[Config, Controller] | None = None
+    resume: bool = False
+    disturbance: bool | None = None
+    script: bool = False
+    instruments_dirty: bool = True
+    errors: list[str] = field(default_factory=list)
+
+
+class Session:
+    """The simulated session (module docstring)."""
+
+    def __init__(self, cfg: Config, seed: int = 0, detector: str = "projected",
+                 history: History | None = None) -> None:
+        self.seed = int(seed)
+        self.detector = checked_choice(detector, "detector", DETECTORS)
+        self.closed = build_loop(cfg, self.seed, self.detector)
+        self.lock = threading.RLock()
+        self.hand = HandInput()
+        self.instruments = [InstrumentTarget() for _ in range(self.closed.world.n_instruments)]
+        self.history = history or History()
+        self.on_tick: list[Callable[[Session, TickResult | None], None]] = []
+        self.held: str | None = None
+        self.alarms: list[str] = []
+        self.max_rcm_error = 0.0  # m, physical, since the last reset_stats()
+        self.ticks = 0
+        self.snapshot: Snapshot | None = None
+        self._req = _Requests()
+        self._disturbance: HousingDisturbance | None = None
+        self._script: HandGuide | None = None
+        self._last: TickResult | None = None
+
+    # -- what the page asks -------------------------------------------------------------------
+    @property
+    def cfg(self) -> Config:
+        return self.closed.cfg
+
+    @property
+    def time(self) -> float:
+        return self.closed.t
+
+    @property
+    def config_pending(self) -> bool:
+        """A parameter change waits for the arm to come to rest (or for a resume)."""
+        return self._req.config is not None
+
+    def set_instrument(self, index: object, visible: object, x: object, y: object) -> None:
+        """Show instrument ``index`` at (x, y) m from the tissue point, or withdraw it."""
+        n = len(self.instruments)
+        i = int(checked_number(index, "instrument", 0, n - 1))
+        r = INSTRUMENT_REACH
+        target = InstrumentTarget(bool(visible), checked_number(x, "instrument x (m)", -r, r),
+                                  checked_number(y, "instrument y (m)", -r, r))
+        with self.lock:
+            self.instruments[i] = target
+            self._req.instruments_dirty = True
+
+    def set_disturbance(self, on: bool) -> None:
+        """Shift the incision housing by :data:`SHIFT` (Fig. 5) from the next tick, or release it."""
+        with self.lock:
+            self._req.disturbance = bool(on)
+
+    def play_view_adjustment(self) -> None:
+        """The Fig. 4 run at the page's grip: a scripted hand turns the view 10° and lets go."""
+        with self.lock:
+            self._req.script = True
+
+    def resume(self) -> None:
+        """Leave a hold at the next tick (no-op when not held)."""
+        with self.lock:
+            self._req.resume = True
+
+    def request_config(self, cfg: Config) -> None:
+        """Use ``cfg`` from the next tick at which the arm is at rest. The controller is built here, in
+        the caller's thread (it may take a moment); UiInputError if it cannot be built."""
+        try:
+            controller = Controller(cfg, self.closed.model)
+        except Exception as exc:  # a configuration the controller refuses: shown on the page
+            raise UiInputError(f"parameters: {exc}") from exc
+        with self.lock:
+            self._req.config = (cfg, controller)
+
+    def reset(self, cfg: Config | None = None, detector: str | None = None) -> None:
+        """A fresh world and controller (the same configuration unless given); the inputs are kept.
+        Built in the caller's thread, swapped in under the lock."""
+        det = self.detector if detector is None else checked_choice(detector, "detector", DETECTORS)
+        closed = build_loop(cfg or self.cfg, self.seed, det)
+        with self.lock:
+            old, self.closed, self.detector = self.closed, closed, det
+            self.held, self.alarms, self._last, self.snapshot = None, [], None, None
+            self._disturbance = self._script = None
+            self._req = _Requests()
+            self.max_rcm_error = 0.0
+            self.history.clear()
+        old.world.close()
+
+    def reset_stats(self) -> None:
+        with self.lock:
+            self.max_rcm_error = 0.0
+
+    def pending_errors(self) -> list[str]:
+        """Errors raised while applying the page's requests in the sim thread (drained)."""
+        with self.lock:
+            out, self._req.errors = self._req.errors, []
+            return out
+
+    # -- the tick -----------------------------------------------------------------------------
+    def step(self) -> TickResult | None:
+        """One 1 ms tick: requests, hand, instruments, the closed loop (or a held cycle), records."""
+        with self.lock:
+            self._apply_requests()
+            grip = self._apply_hand()
+            res = self._cycle(grip)
+            self._after(res)
+            return res
+
+    def _cycle(self, grip: float) -> TickResult | None:
+        c = self.closed
+        if self.held is not None:
+            c.loop.hold_cycle()  # the supervisor holds the arm; the world (hand, housing) goes on
+            if self._disturbance is not None:
+                self._disturbance.apply(c.world, c.t)
+            c.t += CONTROL_DT
+            return None
+        dist = self._disturbance
+        before = None if dist is None else (lambda t: dist.apply(c.world, c.t))
+        try:
+            res = c.step(grip, before_physics=before)
+        except SafetyStopError as exc:
+            self.held = str(exc.reason)
+            self.alarms.append(f"t = {exc.time:.3f} s: {exc.reason}")
+            return None
+        self._last = res
+        return res
+
+    def _apply_hand(self) -> float:
+        w = self.closed.world
+        if self._script is not None:
+            grip = self._script.apply(w, self.closed.t, CONTROL_DT)
+            if not self._script.engaged:
+                self._script = None
+            return grip
+        _, d = w.shaft_axis()
+        force, torque = self.hand.wrench(d)
+        w.set_hand_wrench(force=force, torque=torque)
+        return self.hand.grip_force
+
+    def _apply_requests(self) -> None:
+        r, c = self._req, self.closed
+        if r.resume and self.held is not None and c.supervisor.at_rest:
+            self._restart()
+        r.resume = False
+        if r.config is not None and self.held is None and self._at_rest():
+            self._restart()
+        if r.disturbance is not None:
+            self._disturbance = HousingDisturbance(start=c.t, shift=SHIFT) if r.disturbance else None
+            if not r.disturbance:
+                c.world.set_housing_load(np.zeros(3))
+            r.disturbance = None
+        if r.script:
+            _, d0 = c.world.shaft_axis()
+            target = rotate_axis(d0, [1.0, 1.0, 0.0], 10.0)
+            self._script = HandGuide(target, grip_force=self.hand.grip_force or 17.0)
+            r.script = False
+        if r.instruments_dirty or self.ticks % 100 == 0:  # the ports move with the housing
+            self._place_instruments()
+            r.instruments_dirty = False
+
+    def _restart(self) -> None:
+        """Restart the loop at the measured pose, with the pending configuration if there is one."""
+        c, r = self.closed, self._req
+        p_R = rcm_on_axis(c)
+        if r.config is not None:
+            cfg, controller = r.config
+            r.config = None
+            sup = SafetySupervisor(controller.model.limits, CONTROL_DT,
+                                   SupervisorConfig.from_config(cfg, max_consecutive_misses=0))
+            c.cfg, c.controller, c.loop.controller = cfg, controller, controller
+            c.supervisor, c.loop.supervisor = sup, sup
+        try:
+            restart_loop(c, p_R)
+        except Exception as exc:  # shown on the page; the arm stays held
+            r.errors.append(f"restart failed: {exc}")
+            return
+        self.held = None
+
+    def _at_rest(self) -> bool:
+        return float(np.max(np.abs(self.closed.world.dq))) < AT_REST_SPEED
+
+    def _place_instruments(self) -> None:
+        c = self.closed
+        base = c.world.incision_rest_position() + np.array([0.0, 0.0, -TISSUE_DEPTH])
+        for i, target in enumerate(self.instruments):
+            if target.visible:
+                c.world.set_instrument_tip(i, base + np.array([target.x, target.y, 0.0]))
+            else:
+                park_instrument(c, i)
+
+    def _after(self, res: TickResult | None) -> None:
+        c = self.closed
+        self.ticks += 1
+        e = c.physical_rcm_error()
+        self.max_rcm_error = max(self.max_rcm_error, e)
+        if self.ticks % SAMPLE_EVERY == 0:
+            self.history.append(c.t, self._sample(res, e))
+        if self.ticks % SNAPSHOT_EVERY == 0:
+            self.snapshot = self._snapshot(e)
+        if self.ticks % 1000 == 0:
+            for records in (c.compute_us, c.events):
+                del records[:-KEPT_RECORDS]
+        for callback in self.on_tick:
+            callback(self, res)
+
+    def _sample(self, res: TickResult | None, rcm_error: float) -> dict[str, float]:
+        c = self.closed
+        out = {
+            "RCM error (mm)": rcm_error * 1e3,
+            "trocar force (N)": float(np.linalg.norm(c.world.contact_force())),
+            "δ": 0.0 if res is None else res.delta,
+            "mode": mode_index("held" if res is None else res.mode),
+        }
+        if res is not None:
+            for name, w in res.wrenches.items():
+                out[f"|F| {name}"] = float(np.linalg.norm(w[3:]))
+        return out
+
+    def _snapshot(self, rcm_error: float) -> Snapshot:
+        c, w, res = self.closed, self.closed.world, self._last
+        p_E, d = w.shaft_axis()
+        p_H, _ = w.frame_pose(FRAME_H)
+        points = {"interaction": p_H, "tracking": w.frame_pose(FRAME_C)[0]}
+        cues: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        if res is not None:
+            points["rcm"] = res.p_R
+            cues = {n: (points.get(n, res.p_G), np.asarray(v[3:], float).copy()) for n, v in res.wrenches.items()}
+        dets: tuple = ()
+        if c.detection is not None:
+            latest = c.detection.latest(c.t)
+            if latest is not None:
+                dets = tuple((tuple(map(float, x.box)), tuple(map(float, x.point))) for x in latest.detections)
+        return Snapshot(
+            t=c.t, mode="held" if self.held else c.last_mode, delta=0.0 if res is None else res.delta,
+            held=self.held, alarms=tuple(self.alarms[-5:]), body_pos=w.data.xpos.copy(),
+            body_quat=w.data.xquat.copy(), hand_point=p_H, hand_force=w.hand_force(), cue_forces=cues,
+            trocar_force=w.contact_force(), incision=w.incision_position(),
+            p_R=p_E if res is None else res.p_R.copy(), shaft_dir=d, rcm_error_mm=rcm_error * 1e3,
+            disturbance=self._disturbance is not None, script=self._script is not None,
+            pending_config=self._req.config is not None, detections=dets,
+        )

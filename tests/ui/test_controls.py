@@ -1,0 +1,69 @@
+"""The page's controls: the status line and errors shown instead of raised."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from lapwrench.config import Config
+from lapwrench.ui.controls import Controls, status_text
+from lapwrench.ui.inputs import UiInputError
+from lapwrench.ui.runner import RealTimeRunner
+from lapwrench.ui.session import Session
+
+viser = pytest.importorskip("viser")
+
+
+@pytest.fixture
+def controls(cfg: Config) -> Iterator[Controls]:
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    session = Session(cfg)
+    runner = RealTimeRunner(session.step, lambda: session.time)
+    try:
+        yield Controls(server, session, runner)
+    finally:
+        server.stop()
+        session.closed.world.close()
+
+
+def test_status_text_says_speed_mode_and_holds(controls: Controls) -> None:
+    assert status_text(None, 1.0, False, 25.0) == "starting…"
+    session = controls.session
+    for _ in range(20):
+        session.step()
+    snap = session.snapshot
+    assert snap is not None
+    text = status_text(snap, 0.8, False, 12.0)
+    assert "0.80× real time" in text and "mode **idle**" in text and "12 fps" in text
+    assert "paused" in status_text(snap, float("nan"), True, float("nan"))
+    held = snap.__class__(**{**snap.__dict__, "held": "rcm_error: too far", "alarms": ("t = 1 s: rcm",)})
+    assert "HELD: rcm_error: too far" in status_text(held, 1.0, False, 25.0)
+
+
+def test_errors_from_page_callbacks_are_shown_not_raised(controls: Controls) -> None:
+    def bad(_event: object) -> None:
+        raise UiInputError("push magnitude (N): must be a finite number, got nan")
+
+    controls.guarded(bad)(None)
+    assert "must be a finite number" in controls.error.content
+    controls.guarded(lambda _e: 1 / 0)(None)
+    assert "ZeroDivisionError" in controls.error.content
+    controls.guarded(lambda _e: None)(None)
+    assert controls.error.content == ""
+
+
+def test_refresh_shows_resume_only_while_held_and_keeps_the_gizmo_on_the_handle(controls: Controls) -> None:
+    session = controls.session
+    for _ in range(20):
+        session.step()
+    snap = session.snapshot
+    assert snap is not None
+    controls.refresh(snap, 25.0)
+    assert not controls.resume_button.visible
+    controls.follow_handle(snap)
+    np.testing.assert_allclose(controls.gizmo.position, snap.hand_point, atol=1e-6)
+    held = snap.__class__(**{**snap.__dict__, "held": "rcm_error"})
+    controls.refresh(held, 25.0)
+    assert controls.resume_button.visible

@@ -1,0 +1,132 @@
+"""The simulated session behind the page, stepped directly (no browser, no threads)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from lapwrench.config import Config
+from lapwrench.controller import TickResult
+from lapwrench.ui.inputs import UiInputError
+from lapwrench.ui.session import NoRenderCamera, Session
+
+
+def run(session: Session, seconds: float) -> list[TickResult | None]:
+    return [session.step() for _ in range(round(seconds * 1000))]
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    return math.degrees(math.acos(float(np.clip(a @ b, -1.0, 1.0))))
+
+
+@pytest.fixture
+def session(cfg: Config) -> Iterator[Session]:
+    s = Session(cfg, seed=1)
+    yield s
+    s.closed.world.close()
+
+
+def test_a_gripped_push_turns_the_scope_about_the_incision(session: Session) -> None:
+    _, d0 = session.closed.world.shaft_axis()
+    session.hand.set_grip_level("high")
+    session.hand.set_push(0.0, 15.0)
+    results = run(session, 1.5)
+    _, d1 = session.closed.world.shaft_axis()
+    assert angle_deg(d0, d1) > 1.0
+    assert session.max_rcm_error < 0.002
+    assert session.held is None
+    assert results[-1] is not None and results[-1].mode == "handle"
+    snap = session.snapshot
+    assert snap is not None and snap.mode == "handle" and snap.delta > 1.5
+    assert np.linalg.norm(snap.hand_force) == pytest.approx(15.0, rel=1e-6)
+    names = [c.name for c in session.closed.controller.cues]
+    assert set(snap.cue_forces) == set(names)
+    assert {f"|F| {n}" for n in names} <= set(session.history.names())
+
+
+def test_an_ungripped_push_barely_moves_the_scope(session: Session) -> None:
+    _, d0 = session.closed.world.shaft_axis()
+    session.hand.set_push(0.0, 15.0)
+    run(session, 1.0)
+    _, d1 = session.closed.world.shaft_axis()
+    assert angle_deg(d0, d1) < 0.5
+    assert session.snapshot is not None and session.snapshot.mode == "idle"
+
+
+def test_every_tick_calls_the_per_cycle_callbacks(session: Session) -> None:
+    seen: list[float] = []
+    session.on_tick.append(lambda s, res: seen.append(s.time))
+    run(session, 0.05)
+    assert len(seen) == 50 and seen == sorted(seen)
+
+
+def test_bad_instrument_values_are_refused_and_a_shown_instrument_is_tracked(session: Session) -> None:
+    with pytest.raises(UiInputError):
+        session.set_instrument(0, True, float("nan"), 0.0)
+    with pytest.raises(UiInputError):
+        session.set_instrument(5, True, 0.0, 0.0)
+    assert not session.instruments[0].visible
+    session.set_instrument(0, True, 0.04, 0.0)
+    run(session, 0.5)
+    snap = session.snapshot
+    assert snap is not None and len(snap.detections) == 1
+    assert snap.mode == "tracking"
+
+
+def test_a_parameter_change_is_applied_at_rest(session: Session, cfg: Config) -> None:
+    run(session, 0.1)
+    session.request_config(cfg.replace(viscous={"k_t": 60.0}))
+    assert session.config_pending
+    run(session, 0.05)
+    assert not session.config_pending
+    assert session.cfg.viscous.k_t == 60.0
+    assert session.closed.controller.cfg.viscous.k_t == 60.0
+    run(session, 0.2)
+    assert session.held is None
+
+
+def test_a_hold_keeps_the_world_running_and_resume_restarts_the_loop(cfg: Config) -> None:
+    session = Session(cfg.replace(safety={"max_rcm_error": 0.0001}), seed=2)
+    session.hand.set_grip_level("high")
+    session.hand.set_push(90.0, 25.0)
+    run(session, 2.0)
+    assert session.held is not None and session.alarms
+    t = session.time
+    assert run(session, 0.1)[-1] is None  # held cycles
+    assert session.time > t
+    session.hand.release()
+    run(session, 0.3)
+    session.resume()
+    res = run(session, 0.1)
+    assert session.held is None
+    assert res[-1] is not None
+    session.closed.world.close()
+
+
+def test_the_incision_shift_moves_the_housing_and_reset_starts_over(session: Session) -> None:
+    session.set_disturbance(True)
+    run(session, 1.5)
+    assert session.closed.world.housing_displacement()[1] > 0.003
+    assert session.snapshot is not None and session.snapshot.disturbance
+    session.reset()
+    assert session.time == 0.0 and session.held is None and len(session.history) == 0
+    run(session, 0.2)
+    assert abs(session.closed.world.housing_displacement()[1]) < 1e-3
+
+
+def test_the_scripted_view_adjustment_grips_and_turns(session: Session) -> None:
+    _, d0 = session.closed.world.shaft_axis()
+    session.play_view_adjustment()
+    run(session, 1.0)
+    snap = session.snapshot
+    assert snap is not None and snap.script and snap.delta > 0.5
+    assert angle_deg(d0, session.closed.world.shaft_axis()[1]) > 0.5
+
+
+def test_the_no_render_camera_keeps_the_frame_clock() -> None:
+    cam = NoRenderCamera(25.0)
+    captured = sum(cam.capture(k * 0.001) for k in range(1000))
+    assert captured == 25
