@@ -102,8 +102,7 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
         child_timeout = args.child_timeout or (5.0 if simulated else 0.5)
         rp = RtProcess(spec, tactile=tactile, child_timeout=child_timeout)
         devices.add(rp.close)
-        if args.camera is not None:
-            _start_camera_and_detector(args, cfg, devices, rp, described)
+        camera = _start_camera_and_detector(args, cfg, devices, rp, described) if args.camera is not None else None
         ready = rp.start()
         described.update(ready.get("devices", {}))
         for problem in ready.get("rt_problems", []):
@@ -125,6 +124,10 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
         stop = signals.arm()  # from here on a signal asks for the stop to rest
         print(f"lapwrench run: {ready.get('robot')} ready; devices: {described or 'none'}", file=sys.stderr)
         t0 = time.monotonic()
+        if camera is not None and logger is not None:  # the laparoscope view in the log and the live view
+            from lapwrench.hardware.log.live import FrameTap
+
+            devices.add(FrameTap(camera.buffer, logger, cfg, t0).close)
         if script is not None:
             script.t0 = t0
         if fake_ft is not None:
@@ -173,8 +176,8 @@ def _robot_factory(args: argparse.Namespace, cfg: Any, simulated: bool) -> Calla
 
 def _start_camera_and_detector(
     args: argparse.Namespace, cfg: Any, devices: Devices, rp: Any, described: dict[str, str]
-) -> None:
-    """The camera here, its detector in its own process writing into the loop's bus."""
+) -> Any:
+    """The camera here, its detector in its own process writing into the loop's bus; returns the camera."""
     from lapwrench.drivers import DeviceError
     from lapwrench.drivers.camera import Camera
     from lapwrench.hardware.detector_process import DetectorProcess, spec_factory
@@ -202,6 +205,7 @@ def _start_camera_and_detector(
     det.forward(cam.buffer)
     rp.detector_pid = det.pid
     described["camera"] = cam.device
+    return cam
 
 
 def _cpus(text: str | None) -> tuple[int, ...] | None:

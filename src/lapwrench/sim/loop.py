@@ -137,8 +137,9 @@ _OBSERVERS: list[CycleObserver] = []
 @contextlib.contextmanager
 def observe_cycles(observer: CycleObserver) -> Iterator[None]:
     """Every :class:`ClosedLoop` built while this is active calls ``observer(loop, cycle)`` after each
-    of its cycles (the command sent): how an application above the simulation (live telemetry) sees
-    the runs of scenarios that build their own loops."""
+    of its cycles (the command sent), and ``observer.frame(loop, image, t)`` with each rendered camera
+    frame if the observer has that method: how an application above the simulation (live telemetry)
+    sees the runs of scenarios that build their own loops."""
     _OBSERVERS.append(observer)
     try:
         yield
@@ -192,6 +193,7 @@ class ClosedLoop:
         self.grip_force = 0.0
         self.t = 0.0
         observers = list(_OBSERVERS)
+        self._frame_observers = [f.frame for f in observers if callable(getattr(f, "frame", None))]
         self.loop = ControlLoop(
             self.robot, self.controller, self.supervisor, self._sources(), clock=lambda: self.t,
             wall_deadlines=False, switch_interval=None,
@@ -240,6 +242,8 @@ class ClosedLoop:
         frame = self.camera.frame
         if self.on_frame is not None:
             self.on_frame(frame, t, self.last_mode)
+        for observer in self._frame_observers:  # live telemetry (observe_cycles) that takes frames too
+            observer(self, frame, t)
         if self.detection is not None:
             self.detection.offer(t, frame)
 

@@ -106,3 +106,40 @@ def test_a_taken_port_is_one_line_and_leaves_a_valid_file(tmp_path: Path) -> Non
 def test_a_logger_without_file_or_server_is_refused() -> None:
     with pytest.raises(ValueError, match="file, serves live telemetry, or both"):
         RunLogger(None)
+
+
+def test_the_frame_tap_logs_the_newest_frame_at_5_hz_with_the_latest_detections(tmp_path: Path) -> None:
+    import numpy as np
+
+    from lapwrench.buffer import LatestValue
+    from lapwrench.config import load
+    from lapwrench.drivers.camera import CameraFrame
+    from lapwrench.hardware.log import log_topics
+    from lapwrench.hardware.log.live import FrameTap
+    from lapwrench.hardware.log.topics import IMAGE_TOPIC
+
+    frames: LatestValue[CameraFrame] = LatestValue("camera")
+    path = tmp_path / "run.mcap"
+    with RunLogger(path, None) as logger:
+        logger.cycle(record(0))
+        t0 = time.monotonic()
+        tap = FrameTap(frames, logger, load(), t0)
+        for i in range(12):  # 25 fps for ~0.5 s: the tap takes the newest every 0.2 s
+            frames.put(CameraFrame(np.full((480, 640, 3), i, dtype=np.uint8), i))
+            time.sleep(0.04)
+        tap.close()
+    n = log_topics(path)[IMAGE_TOPIC].messages
+    assert 1 <= n <= 4
+
+
+def test_the_live_view_draws_each_detection_and_ignores_non_finite_points() -> None:
+    import numpy as np
+
+    from lapwrench.config import load
+    from lapwrench.hardware.log.live import annotated_view
+
+    blank = np.zeros((480, 640, 3), dtype=np.uint8)
+    img = annotated_view(blank, np.array([[100.0, 300.0], [np.nan, 5.0]]), load(), "handle")
+    ring = img[294:307, 94:107]
+    assert (ring[..., 1] > 200).any() and (ring[..., 0] < 50).all()  # a green mark at the detection
+    assert not (annotated_view(blank, None, load(), "")[294:307, 94:107, 1] > 200).any()

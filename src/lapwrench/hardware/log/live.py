@@ -90,3 +90,59 @@ class LiveServer:
 
     def stop(self) -> None:
         self.server.stop()
+
+
+IMAGE_PERIOD_S = 0.2  # camera frames go to the log and the live view at 5 Hz (session time)
+
+
+def annotated_view(frame: Any, points: Any, cfg: Any, label: str) -> Any:
+    """The laparoscope frame as the surgeon's assistant wants it live: the ε1/ε2 circles about the
+    principal point (:func:`lapwrench.sim.video.annotate_frame`), the mode, and each detection."""
+    import cv2
+    import numpy as np
+
+    from lapwrench.sim.video import annotate_frame
+
+    img = annotate_frame(np.asarray(frame), cfg, label)
+    for u, v in np.asarray(points if points is not None else np.zeros((0, 2)), dtype=float).reshape(-1, 2):
+        if np.isfinite(u) and np.isfinite(v):
+            cv2.circle(img, (round(u), round(v)), 6, (0, 255, 0), 2, cv2.LINE_AA)
+    return img
+
+
+class FrameTap:
+    """The camera's newest frame to a run logger (the MCAP file and the live view) at 5 Hz, annotated
+    with the detections and the mode of the latest logged cycle: ``lapwrench run --camera`` with
+    ``--log`` or ``--foxglove``. A thread of the parent process, outside the 1 kHz loop's process;
+    JPEG encoding happens on the writer thread (OpenCV releases the GIL there).
+
+    ``buffer`` is the camera driver's latest-value buffer (samples stamped with ``time.monotonic``),
+    ``t0`` the monotonic time of the session's start.
+    """
+
+    def __init__(self, buffer: Any, logger: Any, cfg: Any, t0: float) -> None:
+        import threading
+
+        self.buffer, self.logger, self.cfg, self.t0 = buffer, logger, cfg, t0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="lapwrench-frame-tap", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        last = -1
+        while not self._stop.wait(IMAGE_PERIOD_S):
+            s = self.buffer.get()
+            if s is None or s.seq == last:
+                continue
+            last = s.seq
+            rec = self.logger.last_record
+            points = None if rec is None else rec.instruments
+            label = "" if rec is None else str(rec.mode)
+            try:
+                self.logger.image(s.timestamp - self.t0, annotated_view(s.value.image, points, self.cfg, label))
+            except Exception:  # a malformed frame is not logged; the loop is not this thread's concern
+                continue
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)

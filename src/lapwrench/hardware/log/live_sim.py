@@ -12,7 +12,7 @@ import sys
 from typing import Any
 
 from lapwrench.cli_types import listen_problem
-from lapwrench.hardware.log.live import LiveAddress, LiveError
+from lapwrench.hardware.log.live import IMAGE_PERIOD_S, LiveAddress, LiveError, annotated_view
 from lapwrench.hardware.log.record import cycle_record
 from lapwrench.hardware.log.writer import RunLogger
 
@@ -34,10 +34,20 @@ class SimTelemetry:
         self._loop_id: int | None = None
         self._offset = 0.0
         self._last = 0.0
+        self._next_image = 0.0
+
+    def frame(self, loop: Any, image: Any, t: float) -> None:
+        """A rendered laparoscope frame (5 Hz of session time) with the loop's latest detections."""
+        if t < self._next_image:
+            return
+        self._next_image = t + IMAGE_PERIOD_S
+        obs = loop.detection.observation(t) if loop.detection is not None else None
+        points = None if obs is None else obs.points
+        self.logger.image(self._offset + t, annotated_view(image, points, loop.cfg, loop.last_mode))
 
     def __call__(self, loop: Any, cycle: Any) -> None:
         if id(loop) != self._loop_id:
-            self._loop_id, self._offset = id(loop), self._last
+            self._loop_id, self._offset, self._next_image = id(loop), self._last, 0.0
         t = self._offset + cycle.frame.time
         self._last = max(self._last, t)
         for e in cycle.events:

@@ -99,6 +99,7 @@ class RunLogger:
         self.capacity = capacity
         self.transform_rate_hz = transform_rate_hz
         self.counters = LogCounters()
+        self.last_record: CycleRecord | None = None
         self._solver = FrameSolver(model) if model is not None else None
         self._sink = McapSink(self.path, with_frames=self._solver is not None)
         self.live: LiveServer | None = None
@@ -130,6 +131,7 @@ class RunLogger:
     # -- loop side: O(1), never blocks ----------------------------------------------------------
     def cycle(self, record: CycleRecord) -> None:
         """Hand one cycle to the writer (never blocks; dropped and counted when the ring is full)."""
+        self.last_record = record  # what the camera frames are annotated with (FrameTap)
         if len(self._ring) < self.capacity:
             self._ring.append(record)
         else:
