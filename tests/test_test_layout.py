@@ -52,16 +52,12 @@ UNTESTED: dict[str, str] = {
     "drivers/simulated_hex.py": "the simulated F/T box: tests/drivers/ft (every test talks to it)",
     "safety/config.py": "the supervisor's config: tests/safety/test_supervisor.py",
     "safety/watches.py": "the supervisor's watches: tests/safety/test_supervisor.py",
-    "wrenches/rcm.py": "eq 27-28 through the controller: tests/rcm/test_geometry.py, tests/test_virtual.py",
-    "wrenches/viscous.py": "the viscous wrench through the controller: tests/test_virtual.py",
     "tick_core.py": "the compiled tick: tests/test_compiled_tick.py, tests/test_controller.py",
     # new in issue 13 and still without their own file when this list was written: give them one
-    "robot/arms/spec.py": "the arm spec: tests/robot/test_arms.py",
     "robot/arms/panda.py": "arm data: tests/robot/test_arms.py checks every registered arm",
     "robot/arms/fr3.py": "arm data: tests/robot/test_arms.py",
     "robot/arms/ur5.py": "arm data: tests/robot/test_arms.py",
     "robot/arms/xarm7.py": "arm data: tests/robot/test_arms.py",
-    "robot_kinds.py": "the robot-kind names: tests/robot/test_arms.py",
 }
 
 # Test files that are not about one module (tests/README.md says why).
