@@ -72,6 +72,9 @@ def _empty_points() -> np.ndarray:
     return np.zeros((0, 2), dtype=float)
 
 
+COMPUTE_SAMPLES = 10_000  # detect() timings kept (400 s at 25 fps)
+
+
 class _AsyncBase:
     def __init__(self, detector: Detector, frame_rate: float, max_age: float | None) -> None:
         if not (math.isfinite(frame_rate) and frame_rate > 0):
@@ -138,8 +141,9 @@ class SimulatedAsyncDetector(_AsyncBase):
                                           and latency >= 0):
             raise ValueError(f"latency must be >= 0 seconds or 'measured', got {latency!r}")
         self.latency = latency
-        self.compute_seconds: list[float] = []
-        """Wall time of every ``detect`` call (s), to report the detector's measured inference time."""
+        self.compute_seconds: deque[float] = deque(maxlen=COMPUTE_SAMPLES)
+        """Wall time of the latest ``detect`` calls (s), to report the detector's measured inference time
+        (bounded: a long UI session would otherwise grow it by 25 a second)."""
         self._pending: deque[TimedDetections] = deque()
         self._latest: TimedDetections | None = None
 
