@@ -2,8 +2,9 @@
 the pedal is down.
 
 - ``pedal`` (:data:`PEDAL`, entry point ``lapwrench.inputs``): one number in [0, 1], 1 = pressed.
-  On a robot, a driver publishes it into a ``BufferSource`` of kind ``pedal``; in simulation
-  :func:`simulated_pedal` presses it on the :data:`PRESSED` schedule.
+  In simulation :func:`simulated_pedal` presses it on the :data:`PRESSED` schedule; on a robot
+  (``lapwrench run``) :class:`PedalDriver` is its driver: replace its ``_read`` with your pedal's
+  (a serial line, a USB HID device, a GPIO pin). lapwrench carries its value to the 1 kHz loop.
 - ``pedal_home`` (:class:`PedalHomeCue`, entry point ``lapwrench.cues``): while the pedal reads
   above ``threshold``, a force at the scope tip p_C turns the scope axis toward the configured
   ``home`` direction; with the pedal up (or its reading missing or stale) the wrench is zero.
@@ -15,6 +16,7 @@ lapwrench YAML (see ``pedal.yaml``).
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -39,9 +41,43 @@ def simulated_pedal(world: Any) -> Callable[[float], Vec]:
     return read
 
 
+class PedalDriver:
+    """The pedal's driver on a robot: a thread that reads the pedal at 100 Hz into ``buffer`` (the
+    interface ``InputSpec.open`` returns: ``buffer``, ``close()``, and ``device`` for the start-up line).
+
+    This example has no pedal to read: ``_read`` stands in for one, pressed 2 s out of every 4 s
+    from when the driver starts. Replace it with your device's read.
+    """
+
+    device = "example pedal (pressed 2 s of every 4 s)"
+
+    def __init__(self, cfg: Any) -> None:
+        import threading
+
+        from lapwrench.buffer import LatestValue
+
+        self.buffer: LatestValue[Vec] = LatestValue("pedal")
+        self._t0 = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="pedal", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> Vec:
+        t = (time.monotonic() - self._t0) % 4.0
+        return np.array([1.0 if 1.0 <= t < 3.0 else 0.0])
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.01):
+            self.buffer.put(self._read())
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+
+
 PEDAL = InputSpec(
     name="pedal", shape=(1,), lower=0.0, upper=1.0, max_age=0.1, update_interval=0.01,
-    simulate=simulated_pedal, doc="foot pedal, 0 = up, 1 = down",
+    simulate=simulated_pedal, open=PedalDriver, doc="foot pedal, 0 = up, 1 = down",
 )
 
 

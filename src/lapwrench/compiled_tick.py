@@ -7,7 +7,7 @@ external arrays are made C-contiguous float64 first.
 
 When every configured cue is one of the paper's (fused into the compiled maths) the tick is one
 call (:func:`~lapwrench.tick_core.tick_stage`). With cues that run in Python (plugins) it is two,
-:func:`~lapwrench.tick_core.geometry_stage` and :func:`~lapwrench.tick_core.motion_stage`, with
+:func:`~lapwrench.tick_core.geometry_stage` and :func:`~lapwrench.tick_core.motion_tail`, with
 those cues evaluated on the tick's geometry in between. Both give a :class:`StageResult`.
 """
 
@@ -20,19 +20,11 @@ import numpy as np
 
 from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import NO_AXIS, MeasuredFeedback
-from lapwrench.motion.reference_shaper import advance_reference
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState, residual_force
 from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
 from lapwrench.sensors import ValidInputs
 from lapwrench.spatial import Mat, Vec, Wrench, wrench_transform
-from lapwrench.tick_core import (
-    SaturationInputs,
-    fill_saturation_inputs,
-    geometry_stage,
-    motion_stage,
-    saturation_stage,
-    tick_stage,
-)
+from lapwrench.tick_core import SaturationInputs, geometry_stage, motion_tail, tick_stage
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
 
@@ -139,10 +131,11 @@ class CompiledTick:
 
     def _motion_args(
         self, kin: Kinematics, Minv: Mat, geo: object, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec,
-        stopping: bool, R_E0: Mat,
+        stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
         return (kin, Minv, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
-                _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), self.params)
+                _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
+                self.params)
 
     # -- warm-up -------------------------------------------------------------------------------
     def bind(self, terms: KinematicTerms, Minv: Mat, R_E0: Mat) -> None:
@@ -161,12 +154,9 @@ class CompiledTick:
             g_args = self._geometry_args(kin, None, NO_AXIS, False)
             self._geometry_stage = bind(geometry_stage, *g_args)
             geo, _ = self._geometry_stage(*g_args)
-            m_args = self._motion_args(kin, Minv, geo, none, _NO_EXTRA, zero, False, R_E0)
-            self._motion_stage = bind(motion_stage, *m_args)
-            self._motion_stage(*m_args)
-            s_args = (self.sat, Minv, terms.q, terms.dq, self.params)
-            self._saturation_stage = bind(saturation_stage, *s_args)
-            self._saturation_stage(*s_args)
+            m_args = self._motion_args(kin, Minv, geo, none, _NO_EXTRA, zero, False, R_E0, True)
+            self._motion_tail = bind(motion_tail, *m_args)
+            self._motion_tail(*m_args)
         finally:
             self.rcm.state, self.feedback.offsets = live_rcm, live_offsets
 
@@ -212,19 +202,14 @@ class CompiledTick:
             residual = residual_force(kin.R_H @ _f64(ft.force), _f64(robot.external_force))
         geo, F_lat = self._geometry_stage(*self._geometry_args(kin, residual, measured, has_measured))
         extra = self._evaluate_cues(TickContext(t, kin, geo, inputs))
-        o = self._motion_stage(*self._motion_args(kin, Minv, geo, inputs, extra, ddq_ref, stopping, R_E0))
-        fill_saturation_inputs(self.sat, o, kin, self.params.a_max)
-        admitted = o.admitted and may_admit
-        ref, clamped, at = None, False, _NO_ROWS
-        if admitted:
-            q, dq, ddq, clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, self.params.dt)
-            ref = (q, dq, ddq)
-        elif may_admit:
-            saturated, rows, at, clamped = self._saturation_stage(self.sat, Minv, kin.q, kin.dq, self.params)
-            ref = (rows[0], rows[1], rows[2]) if saturated else None
-        wrenches = {**self._paper_wrenches(o.W_r, o.W_h, o.W_c, o.W_f), **extra.by_name}
-        return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, o.W_n, o.tau, o.delta, o.contacts,
-                           o.non_finite, admitted, ref, bool(clamped), at, extra.telemetry, extra.faults)
+        W, ref, at, tau, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail(
+            *self._motion_args(kin, Minv, geo, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
+        )
+        W_r, W_h, W_c, W_f, W_n = W
+        wrenches = {**self._paper_wrenches(W_r, W_h, W_c, W_f), **extra.by_name}
+        return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, W_n, tau, delta, contacts,
+                           non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
+                           extra.telemetry, extra.faults)
 
     def _evaluate_cues(self, ctx: TickContext) -> _Extra:
         """The Python cues this tick: the null-space wrenches with their points and summed damping, the

@@ -5,8 +5,9 @@ A plugin registers an :class:`InputSpec` in the ``lapwrench.inputs`` entry-point
 (:mod:`lapwrench.sources`) then fills ``SensorFrame.extra[name]`` with a :class:`Reading`; the
 validator checks it against the spec (shape, finite, range, age) like any built-in reading, and a
 valid one reaches the cue as ``ctx.inputs.extra[name]``. In simulation, ``InputSpec.simulate``
-builds the source's read function from the world; on a robot, the user's driver publishes into a
-:class:`~lapwrench.sources.BufferSource` of that kind.
+builds the source's read function from the world; on a robot (``lapwrench run``), ``InputSpec.open``
+starts the plugin's driver in the parent process, whose latest value reaches the 1 kHz loop through
+a shared-memory slot of its own (as the tactile array's does).
 
 Also here: the two checks every reading goes through (real numbers, a fresh stamp), shared with
 :mod:`lapwrench.sensors`.
@@ -27,6 +28,7 @@ BUILT_IN_INPUTS = ("ft", "tactile", "instruments")
 """The inputs the core reads itself (the handle F/T, the tactile grip, the instrument detections)."""
 
 _F64 = np.dtype(np.float64)
+MAX_INPUT_VALUES = 4096  # a registered input's reading: a shared-memory slot of at most this many doubles
 
 
 def real_array(x: object) -> np.ndarray | None:
@@ -81,6 +83,7 @@ class InputSpec:
     update_interval: float = 0.01
     delay: float = 0.0
     simulate: Callable[[Any], Callable[[float], Any]] | None = None
+    open: Callable[[Any], Any] | None = None
     doc: str = ""
 
     def __post_init__(self) -> None:
@@ -94,6 +97,8 @@ class InputSpec:
                 raise ValueError(f"input {self.name!r}: {key} must be a positive number of seconds, got {value!r}")
         if not (math.isfinite(self.delay) and self.delay >= 0.0):
             raise ValueError(f"input {self.name!r}: delay must be >= 0, got {self.delay!r}")
+        if math.prod(self.shape) > MAX_INPUT_VALUES:
+            raise ValueError(f"input {self.name!r}: at most {MAX_INPUT_VALUES} values, got shape {self.shape}")
 
     def check(self, reading: object, now: float) -> tuple[Reading | None, str]:
         """The reading as a valid :class:`Reading`, or None and why it was rejected."""

@@ -147,6 +147,11 @@ def tactile_reading(value: Any, stamp: float) -> TactileReading:
     return TactileReading(np.asarray(value.values, dtype=float), stamp)
 
 
+def registered_reading(value: Any, stamp: float) -> Reading:
+    """A registered input's driver value (an array) as a reading (:mod:`lapwrench.inputs`)."""
+    return Reading(np.asarray(value, dtype=float), stamp)
+
+
 def instruments_reading(value: Any, stamp: float) -> InstrumentObservation:
     """A detector's observation (image ``points``) stamped with its sample's time."""
     return InstrumentObservation(value.points, stamp)

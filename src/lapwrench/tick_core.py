@@ -286,6 +286,56 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickP
 
 
 @kernel
+def motion_tail(
+    kin: Kinematics,
+    Minv: Mat,
+    geo: TaskGeometry,
+    ft_force: Vec,
+    ft_torque: Vec,
+    has_ft: bool,
+    tactile: Vec,
+    has_tactile: bool,
+    points: Mat,
+    extra_W: Mat,
+    extra_points: Mat,
+    extra_D: Mat,
+    extra_task_F: Vec,
+    ddq_ref: Vec,
+    stopping: bool,
+    R_E0: Mat,
+    depth_offset: float,
+    may_admit: bool,
+    sat: SaturationInputs,
+    p: TickParams,
+) -> tuple:  # type: ignore[type-arg]
+    """:func:`motion_stage`, then (with ``may_admit``) the next reference: directly when the desired
+    acceleration meets every limit, through :func:`saturation_stage` when it does not. When neither
+    gives it, ``sat`` holds what the Python saturation levels need.
+
+    Returns packed arrays (numba returns a few arrays much faster than many, or a named tuple):
+    ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows [q⁺, q̇⁺, q̈⁺] (valid when admitted or
+    saturated), which limit rows are at a bound, τ, and the scalars (δ, n_c, non-finite, admitted,
+    saturated, clamped).
+    """
+    o = motion_stage(
+        kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, extra_W, extra_points, extra_D,
+        extra_task_F, ddq_ref, stopping, R_E0, depth_offset, p,
+    )
+    fill_saturation_inputs(sat, o, kin, p.a_max)
+    W = np.empty((5, 6))
+    W[0], W[1], W[2], W[3], W[4] = o.W_r, o.W_h, o.W_c, o.W_f, o.W_n
+    ref = np.zeros((3, kin.q.shape[0]))
+    at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
+    admitted = o.admitted and may_admit
+    saturated, clamped = False, False
+    if admitted:
+        ref[0], ref[1], ref[2], clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, p.dt)
+    elif may_admit:
+        saturated, ref, at, clamped = saturation_stage(sat, Minv, kin.q, kin.dq, p)
+    return W, ref, at, o.tau, o.delta, o.contacts, o.non_finite, admitted, saturated, clamped
+
+
+@kernel
 def tick_stage(
     terms: KinematicTerms,
     Minv: Mat,
@@ -309,37 +359,22 @@ def tick_stage(
     sat: SaturationInputs,
     p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
-    """The whole compiled tick in one call, when there are no extra sources: the kinematics from
-    Pinocchio's terms, ΔF (eq 19) when the F/T and the robot's estimate are both valid,
-    :func:`geometry_stage`, :func:`motion_stage`, and (with ``may_admit``) the next reference:
-    directly when the desired acceleration meets every limit, through :func:`saturation_stage`
-    when it does not. When neither gives it, ``sat`` holds what the Python saturation levels need.
+    """The whole compiled tick in one call, when every cue is compiled (no Python cues): the kinematics
+    from Pinocchio's terms, ΔF (eq 19) when the F/T and the robot's estimate are both valid,
+    :func:`geometry_stage` and :func:`motion_tail`.
 
-    Returns packed arrays (numba returns a few arrays much faster than many):
-    ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows
-    [q⁺, q̇⁺, q̈⁺] (valid when admitted or saturated), which limit rows are at a bound, τ, and the
-    scalars (δ, n_c, has ΔF, non-finite, admitted, saturated, clamped).
+    Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then :func:`motion_tail`'s arrays and
+    scalars.
     """
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
     has_residual = has_ft and has_ext
     residual = residual_force(kin.R_H @ ft_force, ext_force) if has_residual else np.zeros(3)
     geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
-    o = motion_stage(
+    W, ref, at, tau, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
         kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
-        np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], p,
+        np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,
     )
-    fill_saturation_inputs(sat, o, kin, p.a_max)
     vec3 = np.empty((5, 3))
     vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = geo.e_R, geo.p_R, geo.p_G, F_lat, residual
-    W = np.empty((5, 6))
-    W[0], W[1], W[2], W[3], W[4] = o.W_r, o.W_h, o.W_c, o.W_f, o.W_n
-    ref = np.zeros((3, kin.q.shape[0]))
-    at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
-    admitted = o.admitted and may_admit
-    saturated, clamped = False, False
-    if admitted:
-        ref[0], ref[1], ref[2], clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, p.dt)
-    elif may_admit:
-        saturated, ref, at, clamped = saturation_stage(sat, Minv, kin.q, kin.dq, p)
-    return vec3, W, ref, at, o.tau, o.delta, o.contacts, has_residual, o.non_finite, admitted, saturated, clamped
+    return vec3, W, ref, at, tau, delta, contacts, has_residual, non_finite, admitted, saturated, clamped

@@ -96,3 +96,23 @@ def test_a_config_naming_the_cue_without_the_plugin_is_one_line_error() -> None:
                           env=env, timeout=120)
     lines = proc.stdout.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("ConfigError") and "pedal_home" in lines[0]
+
+
+@pytest.mark.slow  # a dry run through the real-time process
+def test_on_the_robot_path_the_pedal_driver_feeds_the_cue_through_the_real_time_process(
+    site: Path, tmp_path: Path
+) -> None:
+    """`lapwrench run --dry-run`: the plugin's driver (InputSpec.open) runs in the parent, its value
+    reaches the 1 kHz loop through a shared-memory slot, and the cue's wrench is in the run's log."""
+    from lapwrench.hardware.log import read_log
+
+    env = {**os.environ, "PYTHONPATH": str(site), "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    log = tmp_path / "run.mcap"
+    cmd = [sys.executable, "-m", "lapwrench.cli", "run", "--dry-run", "--duration", "6", "--log", str(log),
+           "--config", str(EXAMPLE / "pedal.yaml")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "example pedal" in proc.stderr  # the driver is named among the devices
+    cycles = read_log(log)[0]
+    force = [sum(x * x for x in c["wrenches"]["pedal_home"][3:]) ** 0.5 for c in cycles]
+    assert max(force) > 1.0 and min(force) == 0.0  # pressed part of the time (2 s of every 4), released the rest

@@ -69,3 +69,23 @@ def test_a_tactile_config_the_driver_refuses_is_a_cli_error() -> None:
     cfg = argparse.Namespace(tactile=Section())
     with pytest.raises(CliError, match=r"tactile\.header"):
         tactile_format(parse([]), cfg)
+
+
+def test_a_registered_input_driver_that_fails_to_start_is_one_line_naming_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    from fake_plugins import FAKE, PEDAL, install
+
+    from lapwrench import plugins
+    from lapwrench.config import from_dict
+    from lapwrench.hardware.devices import CliError, Devices, open_registered_inputs
+
+    def broken(cfg: object) -> object:
+        raise OSError("no such device /dev/pedal")
+
+    install(monkeypatch)
+    monkeypatch.setitem(FAKE[plugins.INPUT_GROUP], "pedal", dataclasses.replace(PEDAL, open=broken))
+    devices = Devices()
+    with pytest.raises(CliError, match=r"input 'pedal': its driver failed to start: OSError: no such device"):
+        open_registered_inputs(from_dict({"cues": {"pedal_hold": {}}}), devices, {})
+    devices.close()

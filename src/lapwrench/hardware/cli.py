@@ -289,8 +289,8 @@ def _check_run_arguments(args: argparse.Namespace, cfg: Any, *, simulated: bool)
 
 
 def _check_cues(cfg: Any) -> None:
-    """The configured cues build, and none needs a registered input: the robot path has sources for the
-    F/T sensor, the tactile array and the camera only (registered inputs run in simulation)."""
+    """The configured cues build, and every registered input they need has a driver for the robot
+    (``InputSpec.open``; without one, the input runs in simulation only)."""
     from lapwrench.config_ranges import ConfigError
     from lapwrench.wrenches.registry import build_cues, input_specs
 
@@ -300,10 +300,11 @@ def _check_cues(cfg: Any) -> None:
     except ConfigError as exc:
         raise CliError(str(exc)) from exc
     for cue in cues:
-        needs = [name for name in cue.inputs if name in specs]
+        needs = [name for name in cue.inputs if name in specs and specs[name].open is None]
         if needs:
-            raise CliError(f"cue {cue.name!r} needs input {needs[0]!r}, which has no source on the robot yet "
-                           "(registered inputs run in simulation: lapwrench demo); switch the cue off in 'cues:'")
+            raise CliError(f"cue {cue.name!r} needs input {needs[0]!r}, which has no driver for the robot "
+                           "(InputSpec.open is None; it runs in simulation: lapwrench demo); switch the cue off "
+                           "in 'cues:'")
 
 
 def _check_detector(args: argparse.Namespace) -> None:

@@ -228,7 +228,34 @@ def open_sources(
             described["camera"] = cam.device
     except DeviceError as exc:
         raise CliError(f"device not ready: {exc}") from exc
+    for name, (spec, buffer) in open_registered_inputs(cfg, devices, described).items():
+        sources.extra[name] = (buffer, spec.max_age)
     return sources, described
+
+
+def open_registered_inputs(cfg: Any, devices: Devices, described: dict[str, str]) -> dict[str, tuple[Any, Any]]:
+    """Start the driver of every registered input the configured cues ask for (``InputSpec.open``, in
+    this process); return name → (its spec, its latest-value buffer). A driver that fails to start, or
+    an input without one, is a :class:`CliError` naming the input."""
+    from lapwrench.config_ranges import ConfigError
+    from lapwrench.wrenches.registry import build_cues, input_specs
+
+    try:
+        specs = input_specs(build_cues(cfg))
+    except ConfigError as exc:
+        raise CliError(str(exc)) from exc
+    out: dict[str, tuple[Any, Any]] = {}
+    for name, spec in specs.items():
+        if spec.open is None:
+            raise CliError(f"input {name!r} has no driver for the robot (its InputSpec.open is None)")
+        try:
+            driver = spec.open(cfg)
+        except Exception as exc:  # a plugin's driver: its failure is the user's to see, in one line
+            raise CliError(f"input {name!r}: its driver failed to start: {type(exc).__name__}: {exc}") from exc
+        devices.add(driver.close)
+        out[name] = (spec, driver.buffer)
+        described[name] = str(getattr(driver, "device", f"{name} driver"))
+    return out
 
 
 # -- the simulated F/T box in its own process, and the dry run's simulated devices ------------------

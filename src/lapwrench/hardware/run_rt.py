@@ -12,7 +12,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from lapwrench.hardware.devices import CliError, Devices, DryRunScript, _simulated_devices, parse_camera, parse_ft_url
+from lapwrench.hardware.devices import (
+    CliError,
+    Devices,
+    DryRunScript,
+    _simulated_devices,
+    open_registered_inputs,
+    parse_camera,
+    parse_ft_url,
+)
 from lapwrench.hardware.run_common import (
     StopSignals,
     _error_exit,
@@ -78,6 +86,7 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
             server = FrankySimServer(DEFAULT_Q0)
             devices.add(server.stop)
             server.start()
+        registered = open_registered_inputs(cfg, devices, described)  # plugin inputs' drivers, here
         sup_cfg = SupervisorConfig.from_config(
             cfg,
             cycle_budget=args.cycle_budget_us * 1e-6,
@@ -98,9 +107,11 @@ def _run_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopSign
             feeder_timeout=args.feeder_timeout,
             detector_timeout=args.detector_timeout,
             script=script,
+            inputs=tuple((name, s.shape, s.max_age) for name, (s, _) in registered.items()),
         )
         child_timeout = args.child_timeout or (5.0 if simulated else 0.5)
-        rp = RtProcess(spec, tactile=tactile, child_timeout=child_timeout)
+        rp = RtProcess(spec, tactile=tactile, inputs={n: b for n, (_, b) in registered.items()},
+                       child_timeout=child_timeout)
         devices.add(rp.close)
         camera = _start_camera_and_detector(args, cfg, devices, rp, described) if args.camera is not None else None
         ready = rp.start()

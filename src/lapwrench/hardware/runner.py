@@ -21,7 +21,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -35,7 +35,14 @@ from lapwrench.loop_stats import Cycle, LoopStats
 from lapwrench.robot_interface import RobotInterface
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent
 from lapwrench.sensors import InstrumentObservation
-from lapwrench.sources import BufferSource, Source, ft_reading, instruments_reading, tactile_reading
+from lapwrench.sources import (
+    BufferSource,
+    Source,
+    ft_reading,
+    instruments_reading,
+    registered_reading,
+    tactile_reading,
+)
 from lapwrench.spatial import Vec
 
 __all__ = ["ControlLoop", "DetectorWorker", "LoopStats", "SourceAges", "Sources", "hardware_sources"]
@@ -64,12 +71,14 @@ class Sources:
     :class:`~lapwrench.drivers.ft.Wrench`; ``tactile`` objects with ``values`` (64 elements), e.g.
     :class:`~lapwrench.drivers.tactile.TactileFrame`; ``instruments``
     :class:`~lapwrench.sensors.InstrumentObservation` (its ``stamp`` is ignored: the sample's
-    timestamp is used). ``None``: no such source.
+    timestamp is used). ``None``: no such source. ``extra``: the registered inputs the cues ask for
+    (:mod:`lapwrench.inputs`), each a buffer of arrays and its maximum age.
     """
 
     ft: LatestValue[Any] | None = None
     tactile: LatestValue[Any] | None = None
     instruments: LatestValue[InstrumentObservation] | None = None
+    extra: dict[str, tuple[Any, float]] = field(default_factory=dict)  # registered inputs: (buffer, max age s)
 
 
 def hardware_sources(sources: Sources, ages: SourceAges) -> list[Source]:
@@ -81,6 +90,8 @@ def hardware_sources(sources: Sources, ages: SourceAges) -> list[Source]:
         out.append(BufferSource("tactile", sources.tactile, tactile_reading, max_age=ages.tactile))
     if sources.instruments is not None:
         out.append(BufferSource("instruments", sources.instruments, instruments_reading, max_age=ages.instruments))
+    for name, (buffer, max_age) in sources.extra.items():
+        out.append(BufferSource(name, buffer, registered_reading, max_age=max_age))
     return out
 
 

@@ -29,3 +29,35 @@ def test_shared_inputs_flag_corrupt_slots(bus: Bus) -> None:
     slot.write(np.zeros((1, 2)), 9.9, count=1)
     slot.hdr[1] = MAX_POINTS + 4  # a count beyond the slot
     assert "point count" in ins.refresh(10.0)
+
+
+def test_a_registered_input_reads_its_own_slot_as_an_array() -> None:
+    from lapwrench.hardware.rt.bus import bus_layout, input_slot
+
+    b = Bus.create(bus_layout(log_rows=8, event_rows=16, inputs=(("pedal", (2,)), ("grid", (2, 3)))))
+    try:
+        pedal = ShmInput(b.slot(input_slot("pedal")), "pedal", clock=lambda: 10.0, registered=True)
+        b.slot(input_slot("pedal")).write(np.array([0.25, 1.0]), 9.99)
+        assert pedal.refresh(10.0) is None
+        s = pedal.get_fresh(0.1, 10.0)
+        assert s is not None and s.value.tolist() == [0.25, 1.0] and s.timestamp == 9.99
+        b.slot(input_slot("pedal")).write(np.zeros(1), 10.0, count=1)  # fewer rows than its shape
+        assert "1 rows, not 2" in pedal.refresh(10.0)
+        grid = ShmInput(b.slot(input_slot("grid")), "grid", clock=lambda: 10.0, registered=True)
+        b.slot(input_slot("grid")).write(np.arange(6.0).reshape(2, 3), 9.99)  # a 2-D reading, whole
+        assert grid.refresh(10.0) is None and grid.get().value.shape == (2, 3)  # type: ignore[union-attr]
+    finally:
+        b.close()
+
+
+def test_the_input_slots_come_after_the_fixed_regions() -> None:
+    """A process that needs only the fixed regions (the detector) attaches with the shorter layout."""
+    from lapwrench.hardware.rt.bus import bus_layout
+
+    short, long = bus_layout(8, 16), bus_layout(8, 16, (("pedal", (1,)),))
+    assert long.size > short.size
+    b = Bus.create(long)
+    try:
+        assert Bus.attach(b.shm.name, short)["ctl"].shape == (16,)
+    finally:
+        b.close()

@@ -16,9 +16,13 @@ BEAT_PARENT, BEAT_CHILD, BEAT_DETECTOR = 0, 1, 2
 PHASE_STARTING, PHASE_READY, PHASE_RUNNING, PHASE_DONE = 0, 1, 2, 3
 
 
-def bus_layout(log_rows: int = 4096, event_rows: int = 1024) -> Layout:
-    """The regions of the real-time bus (every process builds the same layout)."""
-    return (
+def bus_layout(
+    log_rows: int = 4096, event_rows: int = 1024, inputs: tuple[tuple[str, tuple[int, ...]], ...] = ()
+) -> Layout:
+    """The regions of the real-time bus (every process builds the same layout), with one slot
+    ``input:<name>`` per registered input the cues ask for (:mod:`lapwrench.inputs`), after the
+    fixed regions: a process that needs only those (the detector) attaches with ``inputs=()``."""
+    layout = (
         Layout()
         .add("ctl", np.int64, (16,))
         .add("beat", np.float64, (8,))
@@ -27,3 +31,11 @@ def bus_layout(log_rows: int = 4096, event_rows: int = 1024) -> Layout:
         .ring("log", np.float64, log_rows, CycleCodec.WIDTH)
         .ring("events", np.uint8, event_rows, EVENT_BYTES)
     )
+    for name, shape in inputs:
+        layout = layout.slot(input_slot(name), np.float64, shape)
+    return layout
+
+
+def input_slot(name: str) -> str:
+    """The bus slot of registered input ``name``."""
+    return f"input:{name}"

@@ -24,6 +24,7 @@ from lapwrench.hardware.rt.bus import (
     PHASE_READY,
     PHASE_RUNNING,
     bus_layout,
+    input_slot,
 )
 from lapwrench.hardware.rt.codec import ShmLogSink
 from lapwrench.hardware.rt.inputs import ShmInput
@@ -71,9 +72,9 @@ class _CycleHooks:
         hit = self.watch.check(now)
         if hit is not None:
             message, peer = hit
-            for name in ("tactile",) if peer.beat == BEAT_PARENT else ("instruments",):
-                if name in self.inputs:
-                    self.inputs[name].kill()
+            for name, inp in self.inputs.items():  # the parent feeds tactile and the registered inputs
+                if (name == "instruments") != (peer.beat == BEAT_PARENT):
+                    inp.kill()
             kind = "peer_died" if "exited" in message else "peer_hung"
             self._alarm(now, kind, f"{message}; its inputs are stale")
             self.watch.peers = [p for p in self.watch.peers if p is not peer]
@@ -153,7 +154,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
     signal.signal(signal.SIGHUP, on_term)
     bus = ft = watch = None
     try:
-        bus = Bus.attach(bus_name, bus_layout(spec.log_rows, spec.event_rows))
+        bus = Bus.attach(bus_name, bus_layout(spec.log_rows, spec.event_rows, spec.input_slots))
         ctl = bus["ctl"]
         stop_flag = _StopFlag(ctl)
         stop_flag.signal = pending[0] if pending else None
@@ -176,10 +177,13 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
             inputs["tactile"] = ShmInput(bus.slot("tactile"), "tactile")
         if spec.instruments:
             inputs["instruments"] = ShmInput(bus.slot("instruments"), "instruments")
+        for name, _, _ in spec.inputs:  # registered inputs the cues ask for, fed by the parent
+            inputs[input_slot(name)] = ShmInput(bus.slot(input_slot(name)), name, registered=True)
         watch = PeerWatch(bus["beat"], peers)
         hooks = _CycleHooks(bus, ft, spec.ages.ft, inputs, watch)
         sources = Sources(
-            ft=None if ft is None else ft.buffer, tactile=inputs.get("tactile"), instruments=inputs.get("instruments")
+            ft=None if ft is None else ft.buffer, tactile=inputs.get("tactile"), instruments=inputs.get("instruments"),
+            extra={name: (inputs[input_slot(name)], max_age) for name, _, max_age in spec.inputs},
         )
         loop = ControlLoop(
             robot,

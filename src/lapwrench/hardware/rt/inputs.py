@@ -26,10 +26,14 @@ class ShmInput:
     latest-value buffer (``get_fresh``). :meth:`refresh` reads and checks the slot once per cycle
     (in the loop's ``pre_cycle``); it returns a message when the slot holds corrupt data."""
 
-    def __init__(self, slot: SeqlockSlot, kind: str, clock: Callable[[], float] = time.monotonic) -> None:
-        if kind not in ("tactile", "instruments"):
+    def __init__(
+        self, slot: SeqlockSlot, kind: str, clock: Callable[[], float] = time.monotonic, *, registered: bool = False
+    ) -> None:
+        """``registered``: the slot of a registered input (:mod:`lapwrench.inputs`) named ``kind``, whose
+        value is its array as written (range checks are the validator's, with the input's spec)."""
+        if not registered and kind not in ("tactile", "instruments"):
             raise ValueError(f"unknown shared input {kind!r}")
-        self.slot, self.kind, self.clock = slot, kind, clock
+        self.slot, self.kind, self.clock, self.registered = slot, kind, clock, registered
         self._buf = np.empty_like(slot.data)
         self._seq = 0
         self._sample: Sample[Any] | None = None
@@ -63,6 +67,9 @@ class ShmInput:
         # process is preempted between the two (seen under load), which is no corruption
         if not (math.isfinite(stamp) and stamp <= self.clock() + 0.005):
             problem = f"sample stamp {stamp!r} is not a past monotonic time"
+        elif self.registered:
+            if count != b.shape[0]:  # a whole reading is written: every row of its shape
+                problem = f"{count} rows, not {b.shape[0]}"
         elif self.kind == "tactile":
             if count != TACTILE_N or not np.all(np.isfinite(b)):
                 problem = f"{count} values, non-finite: {int(np.sum(~np.isfinite(b)))}"
@@ -73,8 +80,10 @@ class ShmInput:
         if problem is not None:
             self._sample = None
             return f"{self.kind} slot: {problem}"
-        if self.kind == "tactile":
-            value: Any = _Values(b.copy())
+        if self.registered:
+            value: Any = b.copy()
+        elif self.kind == "tactile":
+            value = _Values(b.copy())
         else:
             value = InstrumentObservation(b[:count].copy(), stamp)
         self._sample = Sample(value, stamp, seq)

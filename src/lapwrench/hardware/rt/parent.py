@@ -24,6 +24,7 @@ from lapwrench.hardware.rt.bus import (
     PHASE_RUNNING,
     TACTILE_N,
     bus_layout,
+    input_slot,
 )
 from lapwrench.hardware.rt.child import _child_main
 from lapwrench.hardware.rt.codec import INTERN, CycleCodec
@@ -38,6 +39,7 @@ class RtProcess:
     Args:
         spec: What the child builds.
         tactile: The tactile latest-value buffer to feed (``None``: no tactile source).
+        inputs: The registered inputs' driver buffers to feed, by name (``spec.inputs`` names them).
         logger: A :class:`~lapwrench.hardware.log.RunLogger` (or duck-typed) for cycles and events.
         detector_pid: The detector process the child should watch (its slot is fed by it).
         feeder: Run the parent's feeder thread (tactile slot + parent heartbeat). Tests turn it
@@ -56,6 +58,7 @@ class RtProcess:
         spec: RtSpec,
         *,
         tactile: LatestValue[Any] | None = None,
+        inputs: dict[str, LatestValue[Any]] | None = None,
         logger: Any = None,
         detector_pid: int | None = None,
         feeder: bool = True,
@@ -70,6 +73,10 @@ class RtProcess:
             raise ValueError("the real-time process is started with 'spawn' or 'forkserver', never 'fork'")
         self.spec = spec
         self.tactile = tactile
+        self.inputs = dict(inputs or {})
+        missing = sorted({name for name, _, _ in spec.inputs} - set(self.inputs))
+        if missing:
+            raise ValueError(f"no driver buffer for the registered inputs {missing}")
         self.logger = logger
         self.detector_pid = detector_pid
         self.feeder = feeder
@@ -79,7 +86,7 @@ class RtProcess:
         self.feed_period = feed_period
         self.stop_wait = stop_wait
         self.ctx = mp.get_context(start_method)
-        self.bus = Bus.create(bus_layout(spec.log_rows, spec.event_rows))
+        self.bus = Bus.create(bus_layout(spec.log_rows, spec.event_rows, spec.input_slots))
         self.codec = CycleCodec()
         self.proc: Any = None
         self.ready: dict[str, Any] = {}
@@ -271,6 +278,8 @@ class RtProcess:
     def _feed(self) -> None:
         beat = self.bus["beat"]
         slot = self.bus.slot("tactile")
+        extra = [(self.inputs[name], self.bus.slot(input_slot(name)), shape) for name, shape, _ in self.spec.inputs]
+        seen = [0] * len(extra)
         last = 0
         while not self._stop.is_set():
             beat[BEAT_PARENT] = time.monotonic()
@@ -281,6 +290,12 @@ class RtProcess:
                     last = s.seq
                     with contextlib.suppress(Exception):  # a malformed frame is not fed
                         slot.write(np.asarray(s.value.values, dtype=float).reshape(TACTILE_N), s.timestamp)
+            for i, (buffer, input_slot_, shape) in enumerate(extra):  # registered inputs, as the tactile frames
+                s = buffer.get()
+                if s is not None and s.seq != seen[i]:
+                    seen[i] = s.seq
+                    with contextlib.suppress(Exception):  # a value of the wrong shape or type is not fed
+                        input_slot_.write(np.asarray(s.value, dtype=float).reshape(shape), s.timestamp)
             self._stop.wait(self.feed_period)
 
     def _drain_loop(self) -> None:

@@ -62,6 +62,12 @@ class RtSpec:
     loop_hook: Callable[[Any], None] | None = None
     log_rows: int = 4096
     event_rows: int = 1024
+    inputs: tuple[tuple[str, tuple[int, ...], float], ...] = ()  # registered inputs: name, shape, max age (s)
+
+    @property
+    def input_slots(self) -> tuple[tuple[str, tuple[int, ...]], ...]:
+        """(name, shape) of each registered input's bus slot (:func:`~lapwrench.hardware.rt.bus.bus_layout`)."""
+        return tuple((name, shape) for name, shape, _ in self.inputs)
 
 
 @dataclass
