@@ -28,9 +28,7 @@ UNTESTED: dict[str, str] = {
     "hardware/rt/options.py": "RtOptions/apply_realtime: tests/hardware/test_rt_process.py",
     "hardware/rt/spec.py": "RtSpec data: tests/hardware/test_rt_process.py",
     "hardware/rt/sizes.py": "constants only",
-    "hardware/rt/bus.py": "the bus layout: every tests/hardware/rt and test_shm.py test builds one",
     "hardware/log/topics.py": "constants only",
-    "hardware/log/record.py": "the CycleRecord dataclass: every tests/hardware/log test writes them",
     # simulation pieces exercised through the world, the scenarios and the demo
     "sim/report.py": "the demo report: tests/sim/test_demo.py",
     "sim/results.py": "scenario results: tests/sim/test_scenarios.py, test_demo.py",
