@@ -13,7 +13,7 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-from lapwrench.drivers.base import DeviceOpenError, DeviceTimeoutError, PacketError
+from lapwrench.drivers.base import DeviceTimeoutError, PacketError
 from lapwrench.drivers.ft.stream import TareCollector, UdpRecordStream
 from lapwrench.drivers.ft.wire import CMD_START_REALTIME, FTRecord, Wrench, named_wrench
 
@@ -51,14 +51,7 @@ class UdpForceTorqueSensor(UdpRecordStream):
         assert self._sock is not None
         self._sock.setblocking(False)
         try:
-            try:
-                self._configure_device()
-            except OSError as exc:
-                raise DeviceOpenError(self.device, f"configuration command failed: {exc}") from exc
-            self.rate.forget_seq()
-            latest = self.buffer.get()
-            seq0 = 0 if latest is None else latest.seq
-            deadline = time.monotonic() + self.start_timeout
+            seq0, deadline = self._begin_streaming()
             last_err: str | None = None
             next_send = 0.0
             while True:
@@ -76,13 +69,7 @@ class UdpForceTorqueSensor(UdpRecordStream):
                 if time.monotonic() >= deadline:
                     break
                 time.sleep(0.001)
-            st = self.status()
-            detail = f"; last error: {st.last_error or last_err}" if (st.last_error or last_err) else ""
-            raise DeviceTimeoutError(
-                self.device,
-                f"no valid record within {self.start_timeout:.2f} s "
-                f"(malformed={st.malformed}, io_errors={st.io_errors}{detail})",
-            )
+            raise self._no_record_error(last_err)
         except BaseException:
             self.stop()
             raise

@@ -157,7 +157,9 @@ class UdpRecordStream(StreamingSource[Wrench]):
     def _configure_device(self) -> None:
         """Hook for device-specific configuration sent before the start command."""
 
-    def _after_thread_start(self) -> None:
+    def _begin_streaming(self) -> tuple[int, float]:
+        """Configure the device for a new start; returns (the newest sequence before it, the deadline
+        for a first valid record). Both start paths (threaded and polled) begin here."""
         try:
             self._configure_device()
         except OSError as exc:
@@ -165,7 +167,20 @@ class UdpRecordStream(StreamingSource[Wrench]):
         self.rate.forget_seq()  # the device restarts its sequence counter on a new start command
         latest = self.buffer.get()
         seq0 = 0 if latest is None else latest.seq  # wait for data newer than a previous run's
-        deadline = time.monotonic() + self.start_timeout
+        return seq0, time.monotonic() + self.start_timeout
+
+    def _no_record_error(self, last_err: str | None) -> DeviceTimeoutError:
+        """The start-up timeout, with the counts and the last error (the device's or a send's)."""
+        st = self.status()
+        detail = f"; last error: {st.last_error or last_err}" if (st.last_error or last_err) else ""
+        return DeviceTimeoutError(
+            self.device,
+            f"no valid record within {self.start_timeout:.2f} s "
+            f"(malformed={st.malformed}, io_errors={st.io_errors}{detail})",
+        )
+
+    def _after_thread_start(self) -> None:
+        seq0, deadline = self._begin_streaming()
         last_err: str | None = None
         while True:
             try:
@@ -179,13 +194,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
                 return
             if time.monotonic() >= deadline:
                 break
-        st = self.status()
-        detail = f"; last error: {st.last_error or last_err}" if (st.last_error or last_err) else ""
-        raise DeviceTimeoutError(
-            self.device,
-            f"no valid record within {self.start_timeout:.2f} s "
-            f"(malformed={st.malformed}, io_errors={st.io_errors}{detail})",
-        )
+        raise self._no_record_error(last_err)
 
     def _read_once(self) -> None:
         sock = self._sock
