@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -52,3 +53,56 @@ def wait_until(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.0
 def open_fds() -> set[str]:
     """This process's open file descriptors (Linux): shows a driver's socket or file come and go."""
     return set(os.listdir("/proc/self/fd"))
+
+
+FD_STEP = 1e-6
+
+
+def numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], q: np.ndarray, h: float = FD_STEP) -> np.ndarray:
+    """Central finite differences of ``f`` at ``q``, one column per component of ``q``."""
+    cols = []
+    for i in range(q.size):
+        dq = np.zeros_like(q)
+        dq[i] = h
+        cols.append((f(q + dq) - f(q - dq)) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+def kinematics_at_rest(model: RobotModel, q: np.ndarray):  # type: ignore[no-untyped-def]
+    """The model's kinematics at ``q`` with zero joint velocity."""
+    return model.kinematics(q, np.zeros(model.nv))
+
+
+def two_joint_limits():  # type: ignore[no-untyped-def]
+    """A made-up two-joint arm's limits (no robot description needed): parameters that follow the
+    arm's joint count."""
+    from lapwrench.robot.limits import JointLimits
+
+    return JointLimits(
+        position_lower=np.array([-1.0, -2.0]),
+        position_upper=np.array([1.0, 2.0]),
+        velocity=np.array([2.0, 4.0]),
+        acceleration=np.array([10.0, 20.0]),
+        jerk=np.array([1000.0, 2000.0]),
+        torque=np.array([80.0, 12.0]),
+        torque_rate=np.array([1000.0, 1000.0]),
+    )
+
+
+def write_file(folder: Path, text: str | bytes, name: str = "c.yaml") -> Path:
+    """``text`` (or bytes, written as they are) in ``folder/name``; returns the path."""
+    path = folder / name
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    return path
+
+
+def unaligned(values: np.ndarray) -> np.ndarray:
+    """A float64 array with the values of ``values`` in memory that is not 8-byte aligned."""
+    raw = bytearray(values.nbytes + 1)
+    a = np.frombuffer(raw, dtype=np.float64, count=values.size, offset=1).reshape(values.shape)
+    a[...] = values
+    assert not a.flags.aligned
+    return a

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from helpers import write_file
 
 from lapwrench import config, config_ranges, config_yaml
 from lapwrench.config import Config, ConfigError, TactileConfig, dump, from_dict, load
@@ -78,27 +79,18 @@ def test_bad_files(tmp_path: Path) -> None:
 # --- issue 11, item 11: the loader refuses what could explode, and ranges match physical sense ---------------------
 
 
-def _write(tmp_path: Path, text: str | bytes, name: str = "c.yaml") -> Path:
-    path = tmp_path / name
-    if isinstance(text, bytes):
-        path.write_bytes(text)
-    else:
-        path.write_text(text)
-    return path
-
-
 def test_huge_numbers_in_a_file_are_refused(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"line 1: config key 'rcm\.Kp' is too large"):
-        load(_write(tmp_path, "rcm: {Kp: " + "9" * 90 + "0" * 310 + "}\n"))  # 400 digits: OverflowError before
+        load(write_file(tmp_path, "rcm: {Kp: " + "9" * 90 + "0" * 310 + "}\n"))  # 400 digits: OverflowError before
     with pytest.raises(ConfigError, match=r"line 1: number longer than 1000 characters"):
-        load(_write(tmp_path, "rcm: {Kp: " + "9" * 10_000 + "}\n"))  # int() would refuse beyond 4300 digits
+        load(write_file(tmp_path, "rcm: {Kp: " + "9" * 10_000 + "}\n"))  # int() would refuse beyond 4300 digits
     with pytest.raises(ConfigError, match=r"line 2: config key 'rcm\.Kd' must be finite"):
-        load(_write(tmp_path, "rcm:\n  Kd: 1e400\n"))
+        load(write_file(tmp_path, "rcm:\n  Kd: 1e400\n"))
 
 
 def test_exponents_without_a_dot_are_numbers(tmp_path: Path) -> None:
     """YAML 1.1 reads 3e-3 as text; in a config it is the number a user means (as in YAML 1.2)."""
-    cfg = load(_write(tmp_path, "adaptive_rcm: {alpha: 3e-3, epsilon: 5E-4}\nrcm: {Kp: 1e3}\n"))
+    cfg = load(write_file(tmp_path, "adaptive_rcm: {alpha: 3e-3, epsilon: 5E-4}\nrcm: {Kp: 1e3}\n"))
     assert (cfg.adaptive_rcm.alpha, cfg.adaptive_rcm.epsilon, cfg.rcm.Kp) == (0.003, 5e-4, 1000.0)
 
 
@@ -121,14 +113,14 @@ def test_error_messages_quote_only_a_short_prefix(tmp_path: Path) -> None:
         with pytest.raises(ConfigError) as err:
             from_dict(data)
         assert len(str(err.value)) < 300 and "x" * 61 not in str(err.value)
-    path = _write(tmp_path, "robot: {kind: " + "y" * 900_000 + "}\n")
+    path = write_file(tmp_path, "robot: {kind: " + "y" * 900_000 + "}\n")
     with pytest.raises(ConfigError, match=r"line 1: config key 'robot\.kind'") as err:
         load(path)
     assert len(str(err.value)) < 300
 
 
 def test_a_bad_value_in_a_file_names_its_line(tmp_path: Path) -> None:
-    path = _write(tmp_path, "# intrinsics\ncamera:\n  width: 640\n  u0: 900\n")
+    path = write_file(tmp_path, "# intrinsics\ncamera:\n  width: 640\n  u0: 900\n")
     with pytest.raises(ConfigError, match=r"c\.yaml line 4: config key 'camera\.u0' \(900\.0\) must lie inside"):
         load(path)
 
@@ -136,7 +128,7 @@ def test_a_bad_value_in_a_file_names_its_line(tmp_path: Path) -> None:
 def test_tactile_wire_format_section(tmp_path: Path) -> None:
     assert load().tactile == TactileConfig(header="AA55", checksum="none", length_byte=False,
                                            checksum_includes_header=False)
-    path = _write(tmp_path, "tactile: {header: 'aa 55 01', checksum: crc16-modbus, length_byte: true}\n")
+    path = write_file(tmp_path, "tactile: {header: 'aa 55 01', checksum: crc16-modbus, length_byte: true}\n")
     t = load(path).tactile
     fmt = TactileFrameFormat(header=bytes.fromhex(t.header), checksum=t.checksum, length_byte=t.length_byte,
                              checksum_includes_header=t.checksum_includes_header)

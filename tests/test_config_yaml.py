@@ -5,25 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from helpers import write_file
 
 from lapwrench import config_yaml
 from lapwrench.config import ConfigError, load
-
-
-def _write(tmp_path: Path, text: str | bytes, name: str = "c.yaml") -> Path:
-    path = tmp_path / name
-    if isinstance(text, bytes):
-        path.write_bytes(text)
-    else:
-        path.write_text(text)
-    return path
 
 
 def test_an_alias_bomb_is_refused_before_any_expansion(tmp_path: Path) -> None:
     """The 544-byte bomb of the campaign took 55 s and 3 GB; this one is the same shape, 4 levels deep."""
     rows = ['a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
     rows += [f"{b}: &{b} [{', '.join(['*' + a] * 9)}]" for a, b in zip("abc", "bcd", strict=True)]
-    bomb = _write(tmp_path, "\n".join(rows) + "\n", "bomb.yaml")
+    bomb = write_file(tmp_path, "\n".join(rows) + "\n", "bomb.yaml")
     with pytest.raises(ConfigError, match=r"bomb\.yaml line 1: YAML anchors \(&name\) are not allowed"):
         load(bomb)
 
@@ -46,7 +38,7 @@ def test_an_alias_bomb_is_refused_before_any_expansion(tmp_path: Path) -> None:
 )
 def test_yaml_beyond_a_plain_mapping_is_refused_with_its_line(tmp_path: Path, text: str, match: str) -> None:
     with pytest.raises(ConfigError, match=r"c\.yaml " + match) as err:
-        load(_write(tmp_path, text))
+        load(write_file(tmp_path, text))
     assert "\n" not in str(err.value)
 
 
@@ -60,13 +52,13 @@ def test_yaml_beyond_a_plain_mapping_is_refused_with_its_line(tmp_path: Path, te
 )
 def test_duplicate_keys_are_refused_with_their_path_and_line(tmp_path: Path, text: str, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
-        load(_write(tmp_path, text))
+        load(write_file(tmp_path, text))
 
 
 def test_a_file_over_one_mebibyte_is_refused_without_reading_it_all(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    big = _write(tmp_path, "# " + "x" * config_yaml.MAX_BYTES + "\nrcm: {Kp: 1.0}\n", "big.yaml")
+    big = write_file(tmp_path, "# " + "x" * config_yaml.MAX_BYTES + "\nrcm: {Kp: 1.0}\n", "big.yaml")
     sizes: list[int] = []
     real_open = Path.open
 
@@ -81,19 +73,19 @@ def test_a_file_over_one_mebibyte_is_refused_without_reading_it_all(
         load(big)
     assert sizes == [config_yaml.MAX_BYTES + 1]
     monkeypatch.undo()
-    assert load(_write(tmp_path, "# " + "x" * 100_000 + "\nrcm: {Kp: 1.0}\n")).rcm.Kp == 1.0
+    assert load(write_file(tmp_path, "# " + "x" * 100_000 + "\nrcm: {Kp: 1.0}\n")).rcm.Kp == 1.0
 
 
 def test_files_that_are_not_readable_text(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     with pytest.raises(ConfigError, match=r"latin1\.yaml is not UTF-8 text"):
-        load(_write(tmp_path, "rcm: {Kp: 1.0}  # café\n".encode("latin-1"), "latin1.yaml"))
+        load(write_file(tmp_path, "rcm: {Kp: 1.0}  # café\n".encode("latin-1"), "latin1.yaml"))
     with pytest.raises(ConfigError, match="is a directory, not a file"):
         load(tmp_path)
     with pytest.raises(ConfigError, match="config file not found"):
         load(tmp_path / "missing.yaml")
     with pytest.raises(ConfigError, match="not found"):
         load("bad\x00name.yaml")
-    locked = _write(tmp_path, "rcm: {Kp: 1.0}\n", "locked.yaml")
+    locked = write_file(tmp_path, "rcm: {Kp: 1.0}\n", "locked.yaml")
 
     def refuse(self: Path, *args: object, **kwargs: object) -> None:
         raise PermissionError(13, "Permission denied", str(self))

@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from helpers import unaligned
 
 from lapwrench.config import load
 from lapwrench.robot.model import RobotModel
@@ -23,15 +24,6 @@ from lapwrench.virtual import DEFAULT_Q0
 @pytest.fixture(scope="module")
 def model() -> RobotModel:
     return RobotModel()
-
-
-def _unaligned(values: np.ndarray) -> np.ndarray:
-    """A float64 array with the values of ``values`` in memory that is not 8-byte aligned."""
-    raw = bytearray(values.nbytes + 1)
-    a = np.frombuffer(raw, dtype=np.float64, count=values.size, offset=1).reshape(values.shape)
-    a[...] = values
-    assert not a.flags.aligned
-    return a
 
 
 # -- the validator -------------------------------------------------------------------------------
@@ -64,7 +56,7 @@ def test_valid_readings_pass_on_as_they_are(validator: InputValidator) -> None:
     assert out.instruments is frame.instruments and out.robot is frame.robot
 
 
-@pytest.mark.parametrize("make", [list, _unaligned, lambda v: np.asarray(v, dtype=np.float32),
+@pytest.mark.parametrize("make", [list, unaligned, lambda v: np.asarray(v, dtype=np.float32),
                                   lambda v: np.repeat(v, 2, axis=0)[::2]],
                          ids=["lists", "unaligned", "float32", "strided"])
 def test_converted_readings_hold_aligned_c_contiguous_float64(

@@ -4,20 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import two_joint_limits
 
 from lapwrench.config import load
-from lapwrench.robot.limits import JointLimits
 from lapwrench.tick_params import TickParams
 
-LIMITS = JointLimits(  # a made-up two-joint arm: the parameters follow the arm's joint count
-    position_lower=np.array([-1.0, -2.0]),
-    position_upper=np.array([1.0, 2.0]),
-    velocity=np.array([2.0, 4.0]),
-    acceleration=np.array([10.0, 20.0]),
-    jerk=np.array([1000.0, 2000.0]),
-    torque=np.array([80.0, 12.0]),
-    torque_rate=np.array([1000.0, 1000.0]),
-)
+LIMITS = two_joint_limits()  # a made-up two-joint arm: the parameters follow the arm's joint count
 
 
 def test_rate_limits_are_scaled_and_the_position_band_keeps_the_margin() -> None:

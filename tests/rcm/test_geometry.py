@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import random_configuration
+from helpers import kinematics_at_rest, numeric_jacobian, random_configuration
 
 from lapwrench.rcm.geometry import (
     closest_point,
@@ -16,24 +16,9 @@ from lapwrench.rcm.geometry import (
 )
 from lapwrench.robot.model import RobotModel
 
-H = 1e-6
-
-
-def _numeric(f, q: np.ndarray) -> np.ndarray:
-    cols = []
-    for i in range(q.size):
-        dq = np.zeros_like(q)
-        dq[i] = H
-        cols.append((f(q + dq) - f(q - dq)) / (2 * H))
-    return np.stack(cols, axis=1)
-
-
-def _kin(model: RobotModel, q: np.ndarray):
-    return model.kinematics(q, np.zeros(7))
-
 
 def _rcm_point(model: RobotModel, q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    kin = _kin(model, q)
+    kin = kinematics_at_rest(model, q)
     return kin.p_E + 0.23 * kin.d_z + 0.01 * rng.standard_normal(3)
 
 
@@ -42,8 +27,8 @@ def test_rcm_jacobian_matches_derivative_of_eq27(any_model: RobotModel, seed: in
     rng = np.random.default_rng(10 + seed)
     q = random_configuration(any_model, rng)
     p_R = _rcm_point(any_model, q, rng)
-    J_num = _numeric(lambda x: rcm_error(_kin(any_model, x), p_R), q)
-    kin = _kin(any_model, q)
+    J_num = numeric_jacobian(lambda x: rcm_error(kinematics_at_rest(any_model, x), p_R), q)
+    kin = kinematics_at_rest(any_model, q)
     np.testing.assert_allclose(rcm_jacobian(kin, p_R), J_num, atol=1e-6)
     np.testing.assert_allclose(lateral_rcm_jacobian(kin, p_R), kin.P @ J_num, atol=1e-6)
 
@@ -53,12 +38,12 @@ def test_closest_point_jacobian(any_model: RobotModel, seed: int) -> None:
     rng = np.random.default_rng(20 + seed)
     q = random_configuration(any_model, rng)
     p_R = _rcm_point(any_model, q, rng)
-    kin = _kin(any_model, q)
+    kin = kinematics_at_rest(any_model, q)
     s_star = closest_point_parameter(kin, p_R, any_model.length)
     _, o_G = closest_point(kin, s_star, any_model.length)
     J_G = closest_point_jacobian(kin, o_G)
     # s* frozen: G is the body-fixed point at s* L along the shaft
-    J_v = _numeric(lambda x: closest_point(_kin(any_model, x), s_star, any_model.length)[0], q)
+    J_v = numeric_jacobian(lambda x: closest_point(kinematics_at_rest(any_model, x), s_star, any_model.length)[0], q)
     np.testing.assert_allclose(J_G[3:], J_v, atol=1e-6)
     np.testing.assert_allclose(J_G[:3], kin.J_E[:3])
 
@@ -66,14 +51,14 @@ def test_closest_point_jacobian(any_model: RobotModel, seed: int) -> None:
 def test_lateral_rcm_jacobian_has_axis_null_direction(panda: RobotModel) -> None:
     rng = np.random.default_rng(3)
     q = random_configuration(panda, rng)
-    kin = _kin(panda, q)
+    kin = kinematics_at_rest(panda, q)
     J = lateral_rcm_jacobian(kin, _rcm_point(panda, q, rng))
     np.testing.assert_allclose(kin.d_z @ J, 0.0, atol=1e-12)
     assert np.linalg.matrix_rank(J, tol=1e-8) == 2
 
 
 def test_closest_point_is_clamped_to_the_shaft(panda: RobotModel) -> None:
-    kin = _kin(panda, np.array([0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785]))
+    kin = kinematics_at_rest(panda, np.array([0.0, 0.2, 0.0, -2.0, 0.0, 2.2, 0.785]))
     beyond = kin.p_E + 2.0 * panda.length * kin.d_z
     behind = kin.p_E - 0.5 * kin.d_z
     assert closest_point_parameter(kin, beyond, panda.length) == 1.0

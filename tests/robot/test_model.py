@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from helpers import random_configuration
+from helpers import kinematics_at_rest, numeric_jacobian, random_configuration, unaligned
 
 from lapwrench.robot.description import FRAME_E
 from lapwrench.robot.model import RobotModel, scope_axis
@@ -30,44 +30,19 @@ def _reference_terms(model: RobotModel, q: np.ndarray, dq: np.ndarray) -> list[n
     return [np.array(a, dtype=np.float64) for a in out]
 
 
-def _unaligned(values: np.ndarray) -> np.ndarray:
-    """A float64 array with the values of ``values`` in memory that is not 8-byte aligned."""
-    raw = bytearray(values.nbytes + 1)
-    a = np.frombuffer(raw, dtype=np.float64, count=values.size, offset=1).reshape(values.shape)
-    a[...] = values
-    assert not a.flags.aligned
-    return a
-
-
 def _states(n: int) -> list[tuple[np.ndarray, np.ndarray]]:
     rng = np.random.default_rng(3)
     return [(DEFAULT_Q0 + rng.uniform(-0.3, 0.3, 7), rng.uniform(-0.5, 0.5, 7)) for _ in range(n)]
-
-
-H = 1e-6
-
-
-def _numeric(f, q: np.ndarray) -> np.ndarray:
-    cols = []
-    for i in range(q.size):
-        dq = np.zeros_like(q)
-        dq[i] = H
-        cols.append((f(q + dq) - f(q - dq)) / (2 * H))
-    return np.stack(cols, axis=1)
-
-
-def _kin(model: RobotModel, q: np.ndarray):
-    return model.kinematics(q, np.zeros(7))
 
 
 @pytest.mark.parametrize("seed", range(5))
 def test_end_effector_jacobian(any_model: RobotModel, seed: int) -> None:
     rng = np.random.default_rng(seed)
     q = random_configuration(any_model, rng)
-    kin = _kin(any_model, q)
-    J_v = _numeric(lambda x: _kin(any_model, x).p_E, q)
+    kin = kinematics_at_rest(any_model, q)
+    J_v = numeric_jacobian(lambda x: kinematics_at_rest(any_model, x).p_E, q)
     R0 = kin.R_E
-    J_w = _numeric(lambda x: R0 @ pin.log3(R0.T @ _kin(any_model, x).R_E), q)
+    J_w = numeric_jacobian(lambda x: R0 @ pin.log3(R0.T @ kinematics_at_rest(any_model, x).R_E), q)
     np.testing.assert_allclose(kin.J_E[3:], J_v, atol=1e-6)
     np.testing.assert_allclose(kin.J_E[:3], J_w, atol=1e-6)
 
@@ -114,7 +89,7 @@ def test_terms_reject_a_joint_vector_of_the_wrong_shape(model: RobotModel, bad: 
 def test_terms_accept_lists_and_other_dtypes(model: RobotModel) -> None:
     q, dq = _states(1)[0]
     want = model.kinematics(q, dq)
-    got = model.kinematics(list(q), _unaligned(dq))
+    got = model.kinematics(list(q), unaligned(dq))
     for name, a, b in zip(want._fields, want, got, strict=True):
         np.testing.assert_array_equal(a, b, err_msg=name)
 
