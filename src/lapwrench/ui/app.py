@@ -93,8 +93,12 @@ class UiApp:
         self._thread = threading.Thread(target=self._page_loop, name="lapwrench-ui-page", daemon=True)
         self._thread.start()
 
+    def request_stop(self) -> None:
+        """Ask :meth:`run_forever` to stop (from a signal handler or another thread)."""
+        self._stop.set()
+
     def run_forever(self) -> None:
-        """Start, then wait until interrupted (Ctrl-C), then stop."""
+        """Start, then wait until interrupted (Ctrl-C) or :meth:`request_stop`, then stop."""
         self.start()
         try:
             while not self._stop.is_set():

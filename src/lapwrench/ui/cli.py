@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import signal
 import sys
 from typing import Any
 
@@ -100,6 +101,8 @@ def ui_main(args: argparse.Namespace) -> int:
             print(f"lapwrench ui: --host/--port {args.host}:{args.port}: {exc.strerror or exc}", file=sys.stderr)
             return 2
         print(f"lapwrench ui: serving {app.url} (Ctrl-C to stop)", flush=True)
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):  # also when the shell left SIGINT ignored
+            signal.signal(sig, lambda *_: app.request_stop())
         app.run_forever()
     s = app.stats()
     print(f"lapwrench ui: stopped at t = {s['sim_time']:.1f} s simulated; last real-time factor {s['rtf']:.2f}")

@@ -34,9 +34,12 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
     """The render process: builds the scene of ``cfg_data`` (a config as a mapping), then for each
     (qpos, mocap_pos, mocap_quat) received renders the laparoscope view (the arm hidden) at ``scale``
     times the camera's size and sends the RGB bytes back; None ends it. Software GL (llvmpipe) is
-    kept to one thread: the other core runs the simulation."""
+    kept to one thread: the other core runs the simulation. Ctrl-C is the parent's to handle (it ends
+    this process with None); a parent that is gone (end of the pipe) ends it too, quietly."""
     import os
+    import signal
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("LP_NUM_THREADS", "1")
     import mujoco
@@ -61,6 +64,8 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
             mujoco.mj_camlight(model, data)
             renderer.update_scene(data, camera=CAMERA_NAME, scene_option=option)
             conn.send_bytes(renderer.render().tobytes())
+    except (EOFError, BrokenPipeError):  # the parent went away without saying so
+        pass
     finally:
         renderer.close()
 
