@@ -27,6 +27,7 @@ finer where the code needs an order inside a group:
 - ``drivers`` < ``perception`` < ``sim`` < ``hardware``: the world. Perception never imports the
   simulation; the simulation uses perception's detectors; the hardware runners host the loop and
   can run the simulated robot in place of the Franka.
+- ``study``: sweeps and tuning on Ray, above the world whose scenarios they run many times.
 - ``apps``: the command line. ``lapwrench.perception.cli`` is its own unit here, in this layer,
   although it sits in ``perception/``: its ``dataset`` command renders with the simulator
   (:mod:`lapwrench.sim.dataset`). Moving that command next to the simulator would let it join
@@ -68,6 +69,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("perception", ("lapwrench.perception",)),
     ("sim", ("lapwrench.sim",)),
     ("hardware", ("lapwrench.hardware",)),
+    ("study", ("lapwrench.study",)),
     ("apps", ("lapwrench.cli", "lapwrench.perception.cli", "lapwrench.ui")),
 )
 """Lowest layer first: (layer name, its units). See the module docstring."""

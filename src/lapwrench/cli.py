@@ -257,6 +257,9 @@ def build_parser() -> argparse.ArgumentParser:
     from lapwrench.ui.cli import add_ui_parser
 
     add_ui_parser(sub)
+    from lapwrench.study.cli import add_parsers as add_study_parsers
+
+    add_study_parsers(sub)
     return p
 
 

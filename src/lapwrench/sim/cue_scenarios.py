@@ -114,7 +114,7 @@ def zoom_run(label: str, cfg: Config, opts: ScenarioOptions, band: tuple[float, 
     """One run of the zoom script. Its tracking time: from ``ZOOM_SETTLE_S`` on, while the detector
     reports both instruments; ``in_band_fraction`` is the share of it with their detected spread in
     the band (``tip_in_band_fraction``: the same for the projected tips, from the simulator)."""
-    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector)
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, world=opts.world)
     trace = Trace()
     duration = ZOOM_SCRIPT[-1][0] * opts.time_scale
     t0 = time.perf_counter()
@@ -216,13 +216,14 @@ def keep_out_cases(cfg: Config, push_s: float) -> list[KeepOutCase]:
 
 def _keep_out_run(cfg: Config, case: KeepOutCase, opts: ScenarioOptions, duration: float) -> Run:
     entry = {**case.zone, "enabled": case.cue}
-    loop = ClosedLoop(cfg.replace(cues={"keep_out": entry}), seed=opts.seed)
+    loop = ClosedLoop(cfg.replace(cues={"keep_out": entry}), seed=opts.seed, world=opts.world)
+    push = opts.world.hand(case.push)  # the surgeon's push and grip
     for i in range(loop.world.n_instruments):  # withdrawn into their ports: out of the view
         loop.world.set_instrument_tip(i, loop.world.port_position(i) + np.array([0.0, 0.0, -0.02]))
     trace = Trace()
     t0 = time.perf_counter()
     while loop.t < duration:
-        grip = case.push.apply(loop.world, loop.t, CONTROL_DT)
+        grip = push.apply(loop.world, loop.t, CONTROL_DT)
         res = loop.step(grip)
         loop.record(trace, res, distance=case.distance(loop.world))
         _progress(opts, loop)

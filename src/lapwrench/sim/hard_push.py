@@ -14,6 +14,10 @@ lets go (grip to zero) and the run settles for ``SETTLE_S``. A hand can neither 
 30 N within one 1 ms tick (a step would also make the measured residual ΔF spike while the
 joint-torque estimate catches up). ``time_scale`` shortens the push and the settling only.
 
+``opts.world`` scales the pushes, the hand's speed and the grip
+(:meth:`~lapwrench.sim.variation.WorldVariation.hand`); a run's ``magnitude`` and ``grip_force_N``
+metrics stay the case's nominal values.
+
 A safety hold (:class:`~lapwrench.sim.loop.SafetyStopError`) ends a run and is recorded as its
 alarm; so is a simulation stop (:class:`~lapwrench.sim.world.SimulationUnstableError`, e.g. the
 scope leaving the trocar). Each run is checked against the issue's targets: physical RCM error
@@ -35,6 +39,7 @@ from lapwrench.config import Config
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
 from lapwrench.sim.results import Run, ScenarioOptions, ScenarioResult, run_metrics
 from lapwrench.sim.surgeon import SpeedDrivenHand, across_shaft, axis_angle
+from lapwrench.sim.variation import WorldVariation
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError, SimWorld
 
 PUSH_S = 1.5  # s the hand pushes (full time scale)
@@ -155,13 +160,15 @@ class TimedHand:
         return self.hand.apply(world, t, dt)
 
 
-def make_hand(case: PushCase, world: SimWorld, push_s: float) -> Hand:
-    """The hand of ``case`` in the world's start pose."""
+def make_hand(case: PushCase, world: SimWorld, push_s: float, variation: WorldVariation | None = None) -> Hand:
+    """The hand of ``case`` in the world's start pose, scaled by ``variation``'s surgeon
+    (:meth:`WorldVariation.hand`: push, speed and grip)."""
+    v = variation or WorldVariation()
     _, R_E = world.frame_pose("lap_E")
     axis = R_E @ np.asarray(case.axis, float)
     if case.kind == "speed":
-        return TimedHand(SpeedDrivenHand(axis, case.magnitude, case.grip_force), push_s)
-    return ConstantPush(case.kind, axis, case.magnitude, case.grip_force, push_s)
+        return TimedHand(v.hand(SpeedDrivenHand(axis, case.magnitude, case.grip_force)), push_s)
+    return v.hand(ConstantPush(case.kind, axis, case.magnitude, case.grip_force, push_s))
 
 
 @dataclass
@@ -190,11 +197,11 @@ class _Watch:
 
 def run_case(cfg: Config, case: PushCase, opts: ScenarioOptions, push_s: float, settle_s: float) -> Run:
     """One hard push from the reset pose; a safety hold or a simulation stop ends it early."""
-    loop = ClosedLoop(cfg, seed=opts.seed)
+    loop = ClosedLoop(cfg, seed=opts.seed, world=opts.world)
     world = loop.world
     watch = _Watch(world.shaft_axis()[1], 0.0, Counter())
     watch.depth0 = watch.tip_depth(world)
-    hand = make_hand(case, world, push_s)
+    hand = make_hand(case, world, push_s, opts.world)
     trace = Trace()
     stop: dict[str, object] = {}
     reported = 0.0

@@ -32,6 +32,7 @@ from lapwrench.sim.sensors import (
     SimForceTorqueSensor,
     TactileGripModel,
 )
+from lapwrench.sim.variation import CorruptedDetector, WorldVariation
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 from lapwrench.sources import Observable, Source, simulated_input
 from lapwrench.wrenches.registry import input_specs
@@ -149,7 +150,11 @@ def observe_cycles(observer: CycleObserver) -> Iterator[None]:
 
 class ClosedLoop:
     """The world, its sensors and the controller, stepped together through the one control loop
-    (:class:`lapwrench.loop.ControlLoop`) on the simulated robot and simulated sources."""
+    (:class:`lapwrench.loop.ControlLoop`) on the simulated robot and simulated sources.
+
+    ``world`` varies the simulated world (:class:`~lapwrench.sim.variation.WorldVariation`): the
+    trocar's stiffness, the detector's latency (unless ``detection_latency`` is given), dropout and
+    noise. The hands are the scenario's (they scale with :meth:`WorldVariation.hand`)."""
 
     def __init__(
         self,
@@ -158,19 +163,22 @@ class ClosedLoop:
         *,
         camera: bool = False,
         detector: str | None = None,
-        detection_latency: float = DETECTION_LATENCY,
+        detection_latency: float | None = None,
         scene_config: SceneConfig | None = None,
         on_frame: Callable[[np.ndarray, float, str], None] | None = None,
+        world: WorldVariation | None = None,
     ) -> None:
         self.cfg = cfg
         self.seed = seed
-        sc = scene_config or SceneConfig.from_config(cfg)
+        self.variation = world or WorldVariation()
+        sc = self.variation.scene(scene_config or SceneConfig.from_config(cfg))
         self.world = SimWorld(build_scene(sc))
         self.world.reset()
         self.model = RobotModel(sc.kind, sc.scope)
         self.controller = Controller(cfg, self.model)
         rng = np.random.SeedSequence(seed)
-        s_ft, s_tac, s_obs = (int(x.generate_state(1)[0]) for x in rng.spawn(3))
+        # the 4th stream (detector corruption) leaves the first three as they were with spawn(3)
+        s_ft, s_tac, s_obs, s_det = (int(x.generate_state(1)[0]) for x in rng.spawn(4))
         self.ft = SimForceTorqueSensor(self.world, seed=s_ft)
         self.tactile = TactileGripModel(seed=s_tac)
         bias = arm_spec(sc.kind).sim_torque_bias
@@ -186,7 +194,12 @@ class ClosedLoop:
         self.detector_name = "none"
         if detector is not None:
             det, self.detector_name = make_detector(detector, self.world, cfg)
-            self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=detection_latency)
+            v = self.variation
+            if v.detector_corrupted:
+                det = CorruptedDetector(det, v.detector_dropout, v.detector_noise_px, seed=s_det)
+                self.detector_name += v.describe_detector()
+            latency = v.detector_latency_s if detection_latency is None else detection_latency
+            self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=latency)
         self.on_frame = on_frame
         self.last_mode = "idle"
         self.ft.tare()

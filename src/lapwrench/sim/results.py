@@ -16,6 +16,7 @@ import numpy as np
 
 from lapwrench.robot.limits import limit_usage
 from lapwrench.sim.loop import ClosedLoop, Trace
+from lapwrench.sim.variation import WorldVariation
 from lapwrench.sim.world import CONTROL_DT
 
 
@@ -41,13 +42,15 @@ class ScenarioResult:
 
 @dataclass(frozen=True)
 class ScenarioOptions:
-    """How a scenario runs: seed, time scale, video output, progress callback and detector."""
+    """How a scenario runs: seed, time scale, video output, progress callback, detector and the
+    world's variation (surgeon, trocar, incision shift, detector corruption; default: none)."""
 
     seed: int = 0
     time_scale: float = 1.0
     video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
     progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
     detector: str = "shipped"  # "shipped", "classical", "projected" or a model path
+    world: WorldVariation = field(default_factory=WorldVariation)  # the default world: no variation
 
 
 DEFAULT_OPTIONS = ScenarioOptions()

@@ -1,15 +1,17 @@
 """The paper's phantom experiments as reproducible closed-loop scenarios.
 
 - ``grip`` (Fig. 4): the same view adjustment at three grip levels (δ ≈ 2.0, 1.1, 0.3).
-- ``rcm-disturbance`` (Fig. 5): the incision housing is pushed 10 mm at t = 3.6 s, with and
-  without RCM adaptation.
+- ``rcm-disturbance`` (Fig. 5): the incision housing is pushed 10 mm (``world.incision_shift_mm``)
+  at t = 3.6 s, with and without RCM adaptation.
 - ``needle-search`` (Fig. 6-7): tracking only → handle & tracking → handle dominant → tracking.
 - ``workflow`` (Fig. 9): handle manipulation and autonomous tracking alternate.
 - ``hard-push`` (issue 9): hostile pushes, a speed-driven hand and a roll torque on the handle
   (:mod:`lapwrench.sim.hard_push`).
 
 Each returns a :class:`ScenarioResult` with its traces and metrics; durations scale with
-``time_scale`` for quick tests (the physics and the controller are unchanged).
+``time_scale`` for quick tests (the physics and the controller are unchanged). ``opts.world``
+varies the world (:class:`~lapwrench.sim.variation.WorldVariation`): every loop gets it, and every
+scripted hand scales with it.
 """
 
 from __future__ import annotations
@@ -80,10 +82,11 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
     levels = [("high", 30.0), ("medium", 17.0), ("low", 5.0)]
     limit = 60.0 * opts.time_scale
     for label, grip_force in levels:
-        loop = ClosedLoop(cfg, seed=opts.seed)
+        loop = ClosedLoop(cfg, seed=opts.seed, world=opts.world)
         _park_instruments(loop)
         _, d0 = loop.world.shaft_axis()
-        hand = HandGuide(rotate_axis(d0, [1.0, 1.0, 0.0], 10.0 * opts.time_scale), grip_force=grip_force)
+        hand = opts.world.hand(HandGuide(rotate_axis(d0, [1.0, 1.0, 0.0], 10.0 * opts.time_scale),
+                                         grip_force=grip_force))
         trace = Trace()
         t0 = time.perf_counter()
         while loop.t < limit and (hand.engaged or loop.t < (hand.done_time or 0) + 0.5):
@@ -94,7 +97,7 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
                 opts.progress(0.1)
         m = run_metrics(loop, trace, time.perf_counter() - t0)
         delta = trace["delta"]
-        m["grip_force_N"] = grip_force
+        m["grip_force_N"] = hand.grip_force
         m["delta_mean"] = float(delta[delta > 0].mean()) if np.any(delta > 0) else 0.0
         m["completion_time_s"] = hand.done_time
         runs.append(Run(label, trace, m))
@@ -116,12 +119,13 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
 
 
 def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
-    """10 mm housing shift at t = 3.6 s with and without RCM adaptation; ΔF(t) both ways."""
+    """10 mm (``world.incision_shift_mm``) housing shift at t = 3.6 s with and without RCM
+    adaptation; ΔF(t) both ways."""
     runs = []
     duration = max(6.0, 12.0 * opts.time_scale)
-    dist = HousingDisturbance(start=3.6, shift=(0.0, 0.01))
+    dist = HousingDisturbance(start=3.6, shift=(0.0, opts.world.incision_shift_mm / 1000.0))
     for label, enabled in (("with adaptation", True), ("without adaptation", False)):
-        loop = ClosedLoop(cfg.replace(adaptive_rcm={"enabled": enabled}), seed=opts.seed)
+        loop = ClosedLoop(cfg.replace(adaptive_rcm={"enabled": enabled}), seed=opts.seed, world=opts.world)
         _park_instruments(loop)
         trace = Trace()
         t0 = time.perf_counter()
@@ -184,7 +188,7 @@ def _scripted_run(
         if round(t / 0.04) % 50 == 0:  # every 2 s for the snapshot strip
             snapshots.append((frame, label))
 
-    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame)
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame, world=opts.world)
     trace = Trace()
     t0 = time.perf_counter()
     try:
@@ -223,13 +227,13 @@ def needle_search(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Scena
     def script(loop: ClosedLoop, t: float) -> float:
         if "hand" not in state:
             _, _d0 = loop.world.shaft_axis()
-            state["hand"] = HandGuide(
+            state["hand"] = opts.world.hand(HandGuide(
                 _axis_toward(loop, needle[0] + 0.004, needle[1] - 0.012),
                 grip_force=24.0,
                 max_force=HAND_FORCE,
                 max_speed=0.25,
                 tolerance_deg=1.5,
-            )
+            ))
             state["local"] = InstrumentPath(
                 _tissue_point(loop, 0, 0),
                 [(0.012, -0.004), (0.0, 0.008), (0.014, 0.006), (0.01, -0.006)],
@@ -270,12 +274,11 @@ def workflow(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioRe
 
     def script(loop: ClosedLoop, t: float) -> float:
         if not state:
-            state["hand1"] = HandGuide(
-                _axis_toward(loop, *gauze1), grip_force=30.0, max_force=HAND_FORCE, max_speed=0.25, tolerance_deg=1.5
-            )
-            state["hand2"] = HandGuide(
-                _axis_toward(loop, *organ), grip_force=30.0, max_force=HAND_FORCE, max_speed=0.25, tolerance_deg=1.5
-            )
+            for key, target in (("hand1", gauze1), ("hand2", organ)):
+                state[key] = opts.world.hand(HandGuide(
+                    _axis_toward(loop, *target), grip_force=30.0, max_force=HAND_FORCE, max_speed=0.25,
+                    tolerance_deg=1.5,
+                ))
             state["tool"] = InstrumentPath(
                 _tissue_point(loop, 0, 0),
                 [

@@ -1,0 +1,164 @@
+"""The ``lapwrench sweep`` and ``lapwrench tune`` commands.
+
+A bad argument or study file ends with one line ``lapwrench sweep: ...`` on stderr and exit code 2,
+before Ray starts. Ctrl-C, SIGTERM and SIGHUP stop a sweep after saving every finished row (exit 130);
+running it again resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from lapwrench.cli_types import int_in, output_dir
+
+ADDRESS_HELP = "an existing Ray cluster (HOST:PORT, or 'auto'); default: start Ray here, embedded"
+
+
+class StudyUsageError(Exception):
+    """A bad argument or file: one line on stderr, exit code 2."""
+
+
+def add_parsers(sub: Any) -> None:
+    """Add ``sweep`` and ``tune`` to ``lapwrench``'s subparsers."""
+    sw = sub.add_parser("sweep", help="run a study (STUDY.yaml) on Ray: many seeded runs, a Parquet table, a report")
+    sw.add_argument("study", metavar="STUDY.yaml", help="the study file (see studies/paper.yaml)")
+    sw.add_argument("--out", type=output_dir, default=None, help="results folder (default reports/sweeps/<name>)")
+    sw.add_argument("--retry-failed", action="store_true", help="run the failed runs of an earlier sweep again")
+    tu = sub.add_parser("tune", help="search gains with Ray Tune for an objective under constraints (TUNE.yaml)")
+    tu.add_argument("study", metavar="TUNE.yaml", help="the tuning file (see studies/tune.yaml)")
+    tu.add_argument("--out", type=output_dir, default=None, help="results folder (default reports/tune/<name>)")
+    for p in (sw, tu):
+        p.add_argument("--address", default=None, help=ADDRESS_HELP)
+        p.add_argument("--workers", type=int_in(1, 256), default=None,
+                       help="CPUs of the embedded Ray, 1 to 256 (default: all of this machine's)")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.set_defaults(func=sweep_main)
+    tu.set_defaults(func=tune_main)
+
+
+def _prepare(args: argparse.Namespace, command: str) -> None:
+    from lapwrench.study import setup
+
+    if args.address is not None and args.workers is not None:
+        raise StudyUsageError("--workers sizes the embedded Ray; a cluster at --address has its own CPUs")
+    if args.address is not None and (not args.address.strip() or len(args.address) > 300):
+        raise StudyUsageError("--address must be HOST:PORT of a Ray head node, or 'auto'")
+    try:
+        setup.ensure(command)
+    except setup.SetupError as exc:
+        raise StudyUsageError(str(exc)) from exc
+
+
+def _stop_on_signals() -> None:
+    """SIGTERM and SIGHUP end the run like Ctrl-C (finished rows saved); Ctrl-C also when the shell
+    left SIGINT ignored."""
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, interrupt)
+
+
+def _out(args: argparse.Namespace, kind: str, name: str) -> Path:
+    from lapwrench.config import ensure_writable_dir
+
+    out = Path(args.out) if args.out else Path("reports") / kind / name
+    try:
+        return ensure_writable_dir(out)
+    except OSError as exc:
+        raise StudyUsageError(f"--out {out} is not writable: {exc.strerror or exc}") from exc
+
+
+def sweep_main(args: argparse.Namespace) -> int:
+    """Run a study; exit 0 when every job ran (failed runs included, as rows), 130 when interrupted."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        from lapwrench.study.spec import StudyError, load_study
+
+        try:
+            spec = load_study(args.study)
+        except StudyError as exc:
+            raise StudyUsageError(str(exc)) from exc
+        _prepare(args, "sweep")
+        out = _out(args, "sweeps", spec.name)
+        from lapwrench.study.runner import ClusterError, run_study
+        from lapwrench.study.table import TableError
+
+        _stop_on_signals()
+        try:
+            outcome, table = run_study(spec, out, address=args.address, workers=args.workers, progress=not args.quiet)
+        except (TableError, ClusterError) as exc:
+            raise StudyUsageError(str(exc)) from exc
+    except StudyUsageError as exc:
+        print(f"lapwrench sweep: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"lapwrench sweep: interrupted; finished runs are saved in {Path(args.out or '.')}; run the same "
+              "command again to resume", file=sys.stderr)
+        return 130
+    from lapwrench.study.report import write_report
+
+    if Path(args.study).resolve() != (out / "study.yaml").resolve():
+        shutil.copyfile(args.study, out / "study.yaml")
+    notes = [f"This sweep ran {outcome.ran} jobs ({outcome.failed} failed) and skipped {outcome.skipped} already in "
+             f"the table, in {outcome.wall_s:.0f} s on {len(outcome.nodes - {'lost'}) or 0} node(s)."]
+    report = write_report(table.frame(), out, spec.report, notes=notes)
+    print(f"lapwrench sweep: {notes[0]}")
+    print(f"results: {table.path}\nreport: {report}")
+    return 0
+
+
+def tune_main(args: argparse.Namespace) -> int:
+    """Search gains; exit 0 with best.yaml written, 1 when no trial met every constraint."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    try:
+        from lapwrench.study.spec import StudyError
+        from lapwrench.study.tune_spec import load_tune
+
+        try:
+            spec = load_tune(args.study)
+        except StudyError as exc:
+            raise StudyUsageError(str(exc)) from exc
+        _prepare(args, "tune")
+        out = _out(args, "tune", spec.name)
+        from lapwrench.study.runner import ClusterError
+        from lapwrench.study.tune import run_tune
+
+        _stop_on_signals()
+        try:
+            outcome = run_tune(spec, out, address=args.address, workers=args.workers, progress=not args.quiet)
+        except ClusterError as exc:
+            raise StudyUsageError(str(exc)) from exc
+    except StudyUsageError as exc:
+        print(f"lapwrench tune: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lapwrench tune: interrupted; no configuration was written", file=sys.stderr)
+        return 130
+    return _finish_tune(spec, out, outcome)
+
+
+def _finish_tune(spec: Any, out: Path, outcome: Any) -> int:
+    """Load best.yaml back, run the scenario set with it once more, and write the report."""
+    from lapwrench import config as config_mod
+    from lapwrench.study.tune import evaluate_config
+    from lapwrench.study.tune_report import write_tune_report
+
+    check = None
+    if outcome.best_config is not None:
+        ev, _ = evaluate_config(spec, config_mod.load(outcome.best_config))
+        check = (f"{'passed' if ev.feasible else 'FAILED'}: {spec.reduce} {spec.objective[2:]} = {ev.objective:.4g}"
+                 + "".join(f", worst {k[2:]} = {v:.4g}" for k, v in ev.worst.items()))
+    report = write_tune_report(outcome.trials, spec, out, best_config=outcome.best_config, check=check)
+    feasible = sum(1 for t in outcome.trials if t.get("feasible") is True)
+    print(f"lapwrench tune: {feasible} of {len(outcome.trials)} trials met every constraint")
+    if outcome.best_config is not None:
+        print(f"best: {outcome.best_config} (check {check})")
+    print(f"report: {report}")
+    return 0 if outcome.best_config is not None else 1

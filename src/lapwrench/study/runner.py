@@ -1,0 +1,175 @@
+"""Run a study's jobs on Ray: embedded and local by default, or on a cluster given its address.
+
+Each job is one Ray task of one CPU (:func:`lapwrench.study.execute.run_job`), so a machine runs as many
+jobs at once as it has cores, and a cluster as many as all its nodes. The driver keeps a few tasks
+per CPU in flight, saves the table as results come back (:class:`~lapwrench.study.table.ResultTable`),
+and shows a progress bar. A task lost with its worker (killed, out of memory) is a failed row like
+any other failure; the study goes on.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lapwrench.study.execute import job_rows, one_line, run_job
+from lapwrench.study.spec import Job, StudySpec
+from lapwrench.study.table import ResultTable
+
+SAVE_EVERY_S = 5.0  # the table is rewritten at most this often while results arrive (and at the end)
+IN_FLIGHT_PER_CPU = 2
+# Every worker process: one thread per maths library (a job is one CPU), headless rendering.
+WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "NUMBA_NUM_THREADS": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+
+
+class ClusterError(RuntimeError):
+    """Ray could not be started here, or the cluster at ``--address`` could not be reached."""
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep did: jobs run now, skipped (already in the table), failed now, nodes used."""
+
+    ran: int = 0
+    skipped: int = 0
+    failed: int = 0
+    wall_s: float = 0.0
+    nodes: set[str] = field(default_factory=set)
+    interrupted: bool = False
+
+
+def check_reachable(address: str, timeout_s: float = 3.0) -> None:
+    """ClusterError unless ``HOST:PORT`` accepts a TCP connection within ``timeout_s`` (Ray itself
+    retries an unreachable address for minutes). ``auto`` is left to Ray."""
+    if address == "auto":
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ClusterError(f"--address {address[:80]!r} is not HOST:PORT of a Ray head node")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ClusterError(f"cannot reach the Ray cluster at {address[:80]}: {exc.strerror or exc}") from exc
+
+
+def start_ray(address: str | None, workers: int | None) -> int:
+    """Connect to the cluster at ``address``, or start Ray here with ``workers`` CPUs (default: all);
+    returns the CPUs the cluster offers."""
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    import ray
+
+    # Ray's notice that token authentication is on (it is, and should be) on every start
+    logging.getLogger("ray._private.authentication.authentication_token_setup").setLevel(logging.ERROR)
+
+    kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "logging_level": logging.WARNING,
+                              "runtime_env": {"env_vars": WORKER_ENV}}
+    if address:
+        check_reachable(address)
+    try:
+        if address:
+            ray.init(address=address, **kwargs)
+        else:
+            ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+        raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
+    return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def _remote() -> Any:
+    import ray
+
+    @ray.remote(num_cpus=1, max_retries=0)
+    def study_task(job: Job, study: str) -> list[dict]:
+        rows = run_job(job, study)
+        node = ray.get_runtime_context().get_node_id()[:8]
+        for r in rows:
+            r["node"] = node
+        return rows
+
+    return study_task
+
+
+def run_study(
+    spec: StudySpec,
+    out: Path,
+    *,
+    address: str | None = None,
+    workers: int | None = None,
+    retry_failed: bool = False,
+    progress: bool = True,
+    on_rows: Callable[[list[dict]], None] | None = None,
+) -> tuple[SweepOutcome, ResultTable]:
+    """Run every job of ``spec`` not yet in ``<out>/runs.parquet``; returns what happened and the table.
+
+    Raises:
+        TableError: the table exists but is damaged (before anything runs).
+        ClusterError: Ray could not start or connect.
+        KeyboardInterrupt: after the finished rows were saved and the running tasks cancelled.
+    """
+    from tqdm import tqdm
+
+    from lapwrench.study.spec import expand
+
+    table = ResultTable(out)
+    if retry_failed:
+        table.drop(table.failed_ids())
+    jobs = expand(spec)
+    done = table.done
+    todo = [j for j in jobs if j.run_id not in done]
+    outcome = SweepOutcome(skipped=len(jobs) - len(todo))
+    if not todo:
+        table.save()
+        return outcome, table
+    t0 = time.perf_counter()
+    cpus = start_ray(address, workers)
+    import ray
+
+    task = _remote()
+    pending: dict[Any, Job] = {}
+    queue = list(reversed(todo))
+    bar = tqdm(total=len(todo), desc=f"sweep {spec.name}", unit="run", disable=not progress, mininterval=1.0)
+    last_save = time.monotonic()
+    try:
+        while queue or pending:
+            while queue and len(pending) < cpus * IN_FLIGHT_PER_CPU:
+                job = queue.pop()
+                pending[task.remote(job, spec.name)] = job
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            for ref in ready:
+                job = pending.pop(ref)
+                try:
+                    rows = ray.get(ref)
+                except Exception as exc:
+                    rows = job_rows(job, spec.name, None, one_line(exc), 0.0)
+                    for r in rows:
+                        r["node"] = "lost"
+                table.add(rows)
+                outcome.ran += 1
+                outcome.failed += any(r["status"] == "failed" for r in rows)
+                outcome.nodes.update(r.get("node", "") for r in rows)
+                if on_rows is not None:
+                    on_rows(rows)
+                bar.update(1)
+                bar.set_postfix(failed=outcome.failed, refresh=False)
+            if time.monotonic() - last_save > SAVE_EVERY_S:
+                table.save()
+                last_save = time.monotonic()
+    except KeyboardInterrupt:
+        outcome.interrupted = True
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        raise
+    finally:
+        bar.close()
+        table.save()
+        outcome.wall_s = time.perf_counter() - t0
+        ray.shutdown()
+    return outcome, table

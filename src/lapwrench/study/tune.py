@@ -1,0 +1,147 @@
+"""``lapwrench tune``: Ray Tune searches the gains of a :class:`~lapwrench.study.tune_spec.TuneSpec`.
+
+Each trial is one configuration: it runs every scenario with every seed (:func:`evaluate`, the same
+job runner as a sweep) and reports one score to Ray Tune. The score is the objective when every
+constraint holds, and ``PENALTY`` plus the summed relative excesses when one does not, so any
+feasible trial beats every infeasible one. The best feasible trial is written as a configuration
+that ``--config`` loads (``best.yaml``), checked by loading it back and running the scenarios again.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lapwrench import config as config_mod
+from lapwrench.sim.variation import WorldVariation
+from lapwrench.study.execute import run_job
+from lapwrench.study.space import apply
+from lapwrench.study.spec import Job
+from lapwrench.study.tune_spec import TuneSpec
+
+PENALTY = 1e6
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One configuration's result over the scenario set."""
+
+    objective: float  # reduced objective (NaN: no row had it)
+    excess: float  # summed relative excess over the constraints (0: all hold)
+    failed: int  # jobs that failed
+    worst: dict[str, float]  # per constraint metric, the worst value over the rows
+
+    @property
+    def feasible(self) -> bool:
+        return self.excess == 0.0 and self.failed == 0 and math.isfinite(self.objective)
+
+    @property
+    def score(self) -> float:
+        if self.feasible:
+            return self.objective
+        return PENALTY * (1.0 + self.excess + self.failed)
+
+
+def _reduce(values: list[float], how: str) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    if not finite:
+        return math.nan
+    return float({"mean": np.mean, "max": np.max, "median": np.median}[how](finite))
+
+
+def score_rows(rows: list[dict], spec: TuneSpec) -> Evaluation:
+    """The :class:`Evaluation` of a trial's rows."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    failed = len({r["run_id"] for r in rows if r["status"] == "failed"})
+    objective = _reduce([float(r.get(spec.objective, math.nan)) for r in ok], spec.reduce)
+    excess, worst = 0.0, {}
+    for c in spec.constraints:
+        values = [float(r.get(c.metric, math.nan)) for r in ok]
+        finite = [v for v in values if math.isfinite(v)]
+        worst[c.metric] = max(finite) if finite else math.nan
+        excess += sum(c.excess(v) for v in values)
+    return Evaluation(objective, excess, failed, worst)
+
+
+def config_jobs(spec: TuneSpec, cfg: config_mod.Config, params: dict[str, Any]) -> list[Job]:
+    """The jobs of one trial: every scenario with every seed, with configuration ``cfg`` (the default world)."""
+    s, world = spec.study, WorldVariation().to_dict()
+    return [Job(sc, seed, params, config_mod.to_dict(cfg), world, s.time_scale, s.detector)
+            for sc in s.scenarios for seed in s.seeds]
+
+
+def evaluate_config(spec: TuneSpec, cfg: config_mod.Config, params: dict[str, Any] | None = None
+                    ) -> tuple[Evaluation, list[dict]]:
+    """Run the scenario set with ``cfg`` here (no Ray) and score it."""
+    rows = [r for job in config_jobs(spec, cfg, params or {}) for r in run_job(job, spec.name)]
+    return score_rows(rows, spec), rows
+
+
+def evaluate(spec: TuneSpec, params: dict[str, Any]) -> tuple[Evaluation, list[dict]]:
+    """One trial: the configuration ``params`` gives, run and scored."""
+    cfg, _ = apply(spec.study.base, params)
+    return evaluate_config(spec, cfg, params)
+
+
+def _trainable(spec: TuneSpec) -> Any:
+    from ray import tune
+
+    def trial(params: dict[str, Any]) -> None:
+        ev, _rows = evaluate(spec, params)
+        tune.report({"score": ev.score, "objective": ev.objective, "excess": ev.excess, "failed": ev.failed,
+                     "feasible": ev.feasible, **{f"worst.{k}": v for k, v in ev.worst.items()}})
+
+    return trial
+
+
+@dataclass
+class TuneOutcome:
+    trials: list[dict[str, Any]]  # one per trial: params (p.*), score, objective, excess, feasible, worst.*
+    best: dict[str, Any] | None  # the best feasible trial's row
+    best_config: Path | None
+
+
+def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: int | None = None,
+             progress: bool = True) -> TuneOutcome:
+    """Search with Ray Tune (random search over ``spec.search``); write ``trials.parquet`` and, when
+    a trial met every constraint, ``best.yaml``."""
+    import ray
+    from ray import tune
+
+    from lapwrench.study.runner import start_ray
+    from lapwrench.study.table import to_frame
+
+    cpus = start_ray(address, workers)
+    try:
+        tuner = tune.Tuner(
+            tune.with_resources(_trainable(spec), {"cpu": 1}),
+            param_space={k: d.to_tune() for k, d in spec.search.items()},
+            tune_config=tune.TuneConfig(metric="score", mode="min", num_samples=spec.trials,
+                                        max_concurrent_trials=cpus),
+            run_config=tune.RunConfig(name=spec.name, storage_path=str((out / "ray_tune").resolve()),
+                                      verbose=1 if progress else 0),
+        )
+        grid = tuner.fit()
+    finally:
+        ray.shutdown()
+    trials = []
+    for result in grid:
+        m = result.metrics or {}
+        row = {**{f"p.{k}": v for k, v in (result.config or {}).items()},
+               **{k: m.get(k, math.nan) for k in ("score", "objective", "excess", "failed", "feasible")},
+               **{k: v for k, v in m.items() if k.startswith("worst.")},
+               "error": None if result.error is None else str(result.error).splitlines()[0][:300]}
+        trials.append(row)
+    trials.sort(key=lambda r: (r["score"] if isinstance(r["score"], float) and math.isfinite(r["score"]) else math.inf))
+    to_frame(trials).to_parquet(out / "trials.parquet", index=False)
+    best = next((r for r in trials if r.get("feasible") is True), None)
+    best_path = None
+    if best is not None:
+        cfg, _ = apply(spec.study.base, {k[2:]: v for k, v in best.items() if k.startswith("p.")})
+        best_path = out / "best.yaml"
+        config_mod.dump(cfg, best_path)
+    return TuneOutcome(trials, best, best_path)
