@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import socket
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,6 +61,13 @@ def check_reachable(address: str, timeout_s: float = 3.0) -> None:
         raise ClusterError(f"cannot reach the Ray cluster at {address[:80]}: {exc.strerror or exc}") from exc
 
 
+def _signal_handlers() -> dict[int, Any]:
+    """The current SIGINT/SIGTERM/SIGHUP handlers (none off the main thread, where they cannot be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+
+
 def start_ray(address: str | None, workers: int | None) -> int:
     """Connect to the cluster at ``address``, or start Ray here with ``workers`` CPUs (default: all);
     returns the CPUs the cluster offers."""
@@ -72,14 +81,18 @@ def start_ray(address: str | None, workers: int | None) -> int:
                               "runtime_env": {"env_vars": WORKER_ENV}}
     if address:
         check_reachable(address)
+    handlers = _signal_handlers()
     try:
         if address:
             ray.init(address=address, **kwargs)
         else:
-            ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+            # "local": a new instance of our own, even when another cluster runs on this machine
+            ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = f"the Ray cluster at {address}" if address else "a local Ray instance"
         raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
+    for sig, handler in handlers.items():  # ray.init installs its own SIGTERM handler: the caller's wins
+        signal.signal(sig, handler)
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
 
 
@@ -118,6 +131,7 @@ def run_study(
 
     from lapwrench.study.spec import expand
 
+    out.mkdir(parents=True, exist_ok=True)
     table = ResultTable(out)
     if retry_failed:
         table.drop(table.failed_ids())

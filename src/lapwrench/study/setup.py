@@ -53,7 +53,10 @@ def ensure(command: str, install: bool = True) -> None:
     if not install:
         raise SetupError(f"needs {', '.join(missing())}: {hint}")
     print(f"[lapwrench] {command}: installing the study extra on first use ({', '.join(reqs)}) ...", file=sys.stderr)
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", *reqs], capture_output=True, text=True)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "pip", "install", "-q", *reqs], capture_output=True, text=True)
+    except OSError as exc:
+        raise SetupError(f"cannot run pip ({exc.strerror or exc}); install the study extra yourself: {hint}") from exc
     importlib.invalidate_caches()
     if proc.returncode != 0 or missing():
         last = (proc.stderr.strip().splitlines() or ["no output"])[-1][:200]

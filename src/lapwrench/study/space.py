@@ -92,13 +92,15 @@ def parse_dist(key: str, spec: Any) -> Dist:
     if not isinstance(spec, dict):
         raise SpaceError(f"'{key}' must be a mapping such as {{uniform: [0.8, 1.2]}}, got {short(spec)}")
     kinds = [k for k in spec if k in KINDS]
-    extra = sorted(set(spec) - set(KINDS) - {"min", "max"})
+    extra = sorted((set(spec) - set(KINDS) - {"min", "max"}), key=str)
     if len(kinds) != 1 or extra:
         raise SpaceError(f"'{key}' needs exactly one of {', '.join(KINDS)} (and min/max for normal), got {short(spec)}")
     kind = kinds[0]
     args = spec[kind]
     if not isinstance(args, list) or not args:
         raise SpaceError(f"'{key}': {kind} takes a list, got {short(args)}")
+    if kind != "normal" and ("min" in spec or "max" in spec):
+        raise SpaceError(f"'{key}': min/max apply to normal only")
     if kind == "choice":
         return Dist(kind, tuple(args))
     if len(args) != 2 or not all(is_number(x) for x in args):
@@ -112,14 +114,16 @@ def parse_dist(key: str, spec: Any) -> Dist:
         if b <= 0 or (low is not None and high is not None and low >= high):
             raise SpaceError(f"'{key}': normal needs sd > 0 and min < max, got {short(spec)}")
         return Dist(kind, (a, b), None if low is None else float(low), None if high is None else float(high))
-    if "min" in spec or "max" in spec:
-        raise SpaceError(f"'{key}': min/max apply to normal only")
     if not a < b:
         raise SpaceError(f"'{key}': {kind} needs low < high, got {short(args)}")
     if kind == "loguniform" and a <= 0:
         raise SpaceError(f"'{key}': loguniform needs low > 0, got {a:g}")
-    if kind == "integer" and not (float(a).is_integer() and float(b).is_integer()):
-        raise SpaceError(f"'{key}': integer takes two whole numbers, got {short(args)}")
+    if not math.isfinite(b - a) or (kind == "integer" and max(abs(a), abs(b)) > 2**53):
+        raise SpaceError(f"'{key}': {kind} range too wide to draw from, got {short(args)}")
+    if kind == "integer":
+        if not (float(a).is_integer() and float(b).is_integer()):
+            raise SpaceError(f"'{key}': integer takes two whole numbers, got {short(args)}")
+        return Dist(kind, (int(a), int(b)))
     return Dist(kind, (a, b))
 
 

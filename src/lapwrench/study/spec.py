@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,7 +92,7 @@ class StudySpec:
         return (*self.grid, *self.sample)
 
     def n_jobs(self) -> int:
-        points = int(np.prod([len(v) for v in self.grid.values()])) if self.grid else 1
+        points = math.prod(len(v) for v in self.grid.values())
         return len(self.scenarios) * len(self.seeds) * points
 
 
@@ -120,6 +121,9 @@ def expand(spec: StudySpec) -> list[Job]:
 
 
 def _seeds(value: Any) -> tuple[int, ...]:
+    count = value if isinstance(value, int) else value.get("count") if isinstance(value, dict) else None
+    if isinstance(count, int) and not isinstance(count, bool) and count > MAX_JOBS:
+        raise StudyError(f"'seeds' asks for {short(count)} seeds: more than {MAX_JOBS} runs")
     if isinstance(value, int) and not isinstance(value, bool):
         seeds = tuple(range(value))
     elif isinstance(value, list):
@@ -167,7 +171,7 @@ def _report(data: Any, name: str) -> ReportSpec:
         if not isinstance(c, dict) or not {"label", "scenario", "metric"} <= set(c) or set(c) - {
                 "label", "scenario", "run", "metric", "paper", "unit"}:
             raise StudyError(f"'{where}' takes label, scenario, metric and optional run, paper, unit; got {short(c)}")
-        if c["scenario"] not in SCENARIOS:
+        if not isinstance(c["scenario"], str) or c["scenario"] not in SCENARIOS:
             raise StudyError(f"'{where}.scenario' {short(c['scenario'])} is not a scenario")
         paper = c.get("paper")
         if paper is not None and not is_number(paper):
@@ -197,7 +201,7 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
     """Validate a parsed study and build its :class:`StudySpec`."""
     if not isinstance(data, dict):
         raise StudyError("a study is a mapping with scenarios, seeds, grid, sample, ...")
-    unknown = sorted(set(data) - TOP_KEYS)
+    unknown = sorted(set(data) - TOP_KEYS, key=str)
     if unknown:
         raise StudyError(f"unknown key {short(unknown[0])} (known: {', '.join(sorted(TOP_KEYS))})")
     name = data.get("name", Path(source).stem)
@@ -207,7 +211,7 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
     if not isinstance(scenarios, list) or not scenarios:
         raise StudyError(f"'scenarios' must list scenario names ({', '.join(SCENARIOS)})")
     for s in scenarios:
-        if s not in SCENARIOS:
+        if not isinstance(s, str) or s not in SCENARIOS:
             raise StudyError(f"'scenarios' holds {short(s)}, not a scenario ({', '.join(SCENARIOS)})")
     ts = data.get("time_scale", 1.0)
     if not (is_number(ts) and 0.05 <= ts <= 1.0):
@@ -226,6 +230,10 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
             if not isinstance(values, list) or not values:
                 raise SpaceError(f"'{key}' must list its values, got {short(values)}")
             check_key(base, key, tuple(values))
+            resolved = [json.dumps(apply(base, {key: v})[1].to_dict() if str(key).startswith("world.")
+                                   else config_mod.to_dict(apply(base, {key: v})[0]), sort_keys=True) for v in values]
+            if len(set(resolved)) != len(resolved):
+                raise SpaceError(f"'{key}' lists the same value twice")
             grid[key] = tuple(values)
         for key, d in sample_in.items():
             if key in grid:

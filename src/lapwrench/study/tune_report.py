@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lapwrench.study.tune_spec import TuneSpec
 
 SHOWN_TRIALS = 20
@@ -30,7 +32,7 @@ def plot_tradeoff(trials: Sequence[dict[str, Any]], spec: TuneSpec, path: Path) 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pts = [(_num(t.get("excess")), _num(t.get("objective")), t.get("feasible") is True) for t in trials]
+    pts = [(_num(t.get("excess")), _num(t.get("objective")), t.get("feasible") in (True, np.True_)) for t in trials]
     pts = [p for p in pts if math.isfinite(p[0]) and math.isfinite(p[1])]
     if not pts:
         return False
@@ -66,7 +68,7 @@ def write_tune_report(trials: Sequence[dict[str, Any]], spec: TuneSpec, out: Pat
         lines += ["Constraints, in every run of every scenario (a failed run breaks them all):", ""]
         lines += [f"- `{c.metric[2:]}` ≤ {c.max:g}" for c in spec.constraints]
         lines.append("")
-    feasible = sum(1 for t in trials if t.get("feasible") is True)
+    feasible = sum(1 for t in trials if t.get("feasible") in (True, np.True_))
     lines.append(f"**{feasible} of {len(trials)} trials met every constraint.**")
     lines.append("")
     if best_config is not None:
@@ -79,11 +81,11 @@ def write_tune_report(trials: Sequence[dict[str, Any]], spec: TuneSpec, out: Pat
         lines += ["![trade-off](tune_tradeoff.png)", "",
                   "*Each trial's objective against how far it broke the constraints.*", ""]
     worst = [f"worst.{c.metric}" for c in spec.constraints]
-    head = ["#", *[k[2:] for k in keys], "feasible", spec.objective[2:], *[w[9:] + " (worst)" for w in worst]]
+    head = ["#", *[k[2:] for k in keys], "feasible", spec.objective[2:], *[w[8:] + " (worst)" for w in worst]]
     lines += [f"## Best {min(SHOWN_TRIALS, len(trials))} trials", "", "| " + " | ".join(head) + " |",
               "|" + "---|" * len(head)]
     for i, t in enumerate(trials[:SHOWN_TRIALS]):
-        cells = [str(i + 1), *[_fmt(t.get(k)) for k in keys], "yes" if t.get("feasible") is True else "no",
+        cells = [str(i + 1), *[_fmt(t.get(k)) for k in keys], "yes" if t.get("feasible") in (True, np.True_) else "no",
                  _fmt(t.get("objective")), *[_fmt(t.get(w)) for w in worst]]
         lines.append("| " + " | ".join(cells) + " |")
     errors = [t for t in trials if t.get("error")]

@@ -94,7 +94,7 @@ def from_dict(data: Any, source: str = "tune") -> TuneSpec:
     """Validate a parsed tuning file and build its :class:`TuneSpec`."""
     if not isinstance(data, dict):
         raise StudyError("a tuning file is a mapping with scenarios, search, objective, ...")
-    unknown = sorted(set(data) - TOP_KEYS)
+    unknown = sorted(set(data) - TOP_KEYS, key=str)
     if unknown:
         raise StudyError(f"unknown key {short(unknown[0])} (known: {', '.join(sorted(TOP_KEYS))})")
     shared = {k: data[k] for k in ("name", "scenarios", "seeds", "config", "time_scale", "detector") if k in data}
@@ -109,7 +109,7 @@ def from_dict(data: Any, source: str = "tune") -> TuneSpec:
     search: dict[str, Dist] = {}
     for key, d in search_in.items():
         try:
-            if str(key).startswith("world.") or key == "robot":
+            if str(key).startswith("world.") or key in ("robot", "robot.kind"):
                 raise SpaceError(f"'{key}' is part of the world, not a gain: tune searches configuration keys")
             search[key] = parse_dist(key, d)
             check_key(study.base, key, search[key].corners())

@@ -1,0 +1,118 @@
+"""``lapwrench sweep`` and ``lapwrench tune`` as a user runs them: bad arguments and files end with one line
+and exit code 2 before Ray starts; a sweep killed halfway keeps its finished rows and resumes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from lapwrench.cli import main
+
+
+def _write(path: Path, data: object) -> Path:
+    path.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return path
+
+
+STUDY = {"name": "cli", "scenarios": ["grip"], "seeds": 1, "time_scale": 0.05, "detector": "projected"}
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["sweep", "/no/such/study.yaml"], "study file not found"),
+        (["sweep", "{dir}"], "is a directory"),
+        (["sweep", "{bad}"], "'scenarios' holds 'nope'"),
+        (["sweep", "{good}", "--address", "127.0.0.1:1"], "cannot reach the Ray cluster"),
+        (["sweep", "{good}", "--address", "x:1", "--workers", "2"], "--workers sizes the embedded Ray"),
+        (["sweep", "{good}", "--address", "no-port"], "not HOST:PORT"),
+        (["sweep", "{good}", "--out", "{file}"], "--out"),
+        (["tune", "{good}"], "'search' must map parameter keys"),
+        (["tune", "/no/such/tune.yaml"], "tuning file not found"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str],
+                                          message: str) -> None:
+    paths = {
+        "dir": str(tmp_path),
+        "bad": str(_write(tmp_path / "bad.yaml", {**STUDY, "scenarios": ["nope"]})),
+        "good": str(_write(tmp_path / "good.yaml", STUDY)),
+        "file": str(_write(tmp_path / "afile", "x")),
+    }
+    argv = [a.format(**paths) for a in argv]
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own refusals (a --out that is a file)
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert message in err, err
+    assert "Traceback" not in err
+    errors = [line for line in err.splitlines() if "error" in line or line.startswith("lapwrench")]
+    assert len(errors) == 1, err  # one line (argparse puts its usage lines before its own)
+
+
+@pytest.mark.slow
+def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
+    """SIGTERM in the middle: exit 130, a readable table with the finished jobs; the same command again
+    runs only the rest and writes the report."""
+    study = _write(tmp_path / "study.yaml", {**STUDY, "seeds": 6})
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(out), "--workers", "1", "--quiet"]
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    table = out / "runs.parquet"
+    deadline = time.monotonic() + 240
+    while not table.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.5)
+    assert table.exists(), proc.communicate()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    first = pd.read_parquet(table)
+    done = first.run_id.nunique()
+    assert 1 <= done < 6
+    assert not (out / "runs.parquet.tmp").exists()
+
+    again = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert f"ran {6 - done} jobs (0 failed) and skipped {done}" in again.stdout
+    rows = pd.read_parquet(table)
+    assert rows.run_id.nunique() == 6 and len(rows) == 18
+    assert (out / "report.md").exists() and (out / "study.yaml").exists()
+
+
+@pytest.mark.slow
+def test_tiny_tuning_run_writes_a_preset_that_loads_and_passes(tmp_path: Path) -> None:
+    tune_file = _write(tmp_path / "tune.yaml", {
+        **STUDY, "name": "tiny-tune", "trials": 2,
+        "search": {"viscous.k_t": {"uniform": [120.0, 180.0]}},
+        "objective": {"metric": "duration_s"},
+        "constraints": [{"metric": "rcm_error_max_mm", "max": 5.0}, {"metric": "trocar_force_max_N", "max": 10.0}],
+    })
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "lapwrench.cli", "tune", str(tune_file), "--out", str(out),
+                           "--workers", "2", "--quiet"], capture_output=True, text=True, timeout=900,
+                          env={**os.environ, "MUJOCO_GL": "egl"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "2 of 2 trials met every constraint" in proc.stdout
+    assert "check passed" in proc.stdout
+    from lapwrench import config as config_mod
+
+    best = config_mod.load(out / "best.yaml")
+    trials = pd.read_parquet(out / "trials.parquet")
+    assert len(trials) == 2
+    assert best.viscous.k_t == pytest.approx(float(trials.iloc[0]["p.viscous.k_t"]))
+    assert 120.0 <= best.viscous.k_t <= 180.0
+    report = (out / "tune_report.md").read_text()
+    assert "2 of 2 trials met every constraint" in report and (out / "tune_tradeoff.png").exists()

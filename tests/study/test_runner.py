@@ -1,0 +1,132 @@
+"""lapwrench.study.runner on real Ray: a small study on local Ray with 2 CPUs (rows, resume, a failure
+kept as a row), a lost worker, and a two-node cluster started with ``ray start`` on this machine."""
+
+from __future__ import annotations
+
+import os
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from lapwrench.study.runner import ClusterError, check_reachable, run_study
+from lapwrench.study.spec import from_dict
+
+pytestmark = pytest.mark.slow
+
+# grip at time scale 0.05: a 0.5° view change, three short runs per job (a few seconds each).
+# safety.max_residual_force = 0.01 N trips the supervisor at once: that job fails, as a row.
+STUDY = {
+    "name": "small",
+    "scenarios": ["grip"],
+    "seeds": 2,
+    "time_scale": 0.05,
+    "detector": "projected",
+    "grid": {"safety.max_residual_force": [20.0, 0.01]},
+    "sample": {"world.surgeon_force": {"uniform": [0.9, 1.1]}},
+}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_small_study_rows_resume_and_failures(tmp_path: Path) -> None:
+    spec = from_dict(STUDY)
+    outcome, _ = run_study(spec, tmp_path, workers=2, progress=False)
+    rows = pd.read_parquet(tmp_path / "runs.parquet")
+    assert outcome.ran == 4 and outcome.skipped == 0 and outcome.failed == 2
+    ok = rows[rows.status == "ok"]
+    failed = rows[rows.status == "failed"]
+    assert len(ok) == 2 * 3  # two good jobs, three grip levels each
+    assert sorted(ok.label.unique()) == ["high", "low", "medium"]
+    assert len(failed) == 2 and failed.label.isna().all()
+    assert failed.error.str.contains("safety supervisor stopped").all()
+    assert (failed["p.safety.max_residual_force"] == 0.01).all()
+    assert failed.config.str.contains("max_residual_force: 0.01").all()  # kept with its configuration
+    assert ok["m.rcm_error_max_mm"].notna().all()
+    assert rows.run_id.nunique() == 4 and rows.node.nunique() == 1
+
+    again, _ = run_study(spec, tmp_path, workers=2, progress=False)
+    assert again.ran == 0 and again.skipped == 4
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "runs.parquet"), rows)
+
+    retried, _ = run_study(spec, tmp_path, workers=2, progress=False, retry_failed=True)
+    assert retried.ran == 2 and retried.skipped == 2 and retried.failed == 2
+    assert len(pd.read_parquet(tmp_path / "runs.parquet")) == len(rows)
+
+
+def test_unreachable_cluster_is_a_clear_error() -> None:
+    with pytest.raises(ClusterError, match=r"cannot reach the Ray cluster at 127\.0\.0\.1:1"):
+        check_reachable("127.0.0.1:1")
+    for bad in ("nonsense", "host:", ":80", "host:99999"):
+        with pytest.raises(ClusterError, match="not HOST:PORT"):
+            check_reachable(bad)
+
+
+def _ray_cli() -> str:
+    ray = shutil.which("ray", path=str(Path(sys.executable).parent))
+    assert ray, "the ray command comes with the study extra"
+    return ray
+
+
+def _start_node(args: list[str], temp: Path) -> subprocess.Popen:
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}  # with the test's RAY_AUTH_* (see below)
+    return subprocess.Popen([_ray_cli(), "start", "--block", "--num-cpus=1", "--node-ip-address=127.0.0.1",
+                             "--disable-usage-stats", *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            env=env, start_new_session=True, cwd=temp)
+
+
+def _wait_for_nodes(address: str, n: int, timeout_s: float = 90.0) -> None:
+    code = ("import ray, sys; ray.init(address=sys.argv[1], logging_level='ERROR'); "
+            "print(sum(1 for x in ray.nodes() if x['Alive']))")
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        out = subprocess.run([sys.executable, "-c", code, address], capture_output=True, text=True, timeout=60)
+        if out.stdout.strip().isdigit() and int(out.stdout.strip()) >= n:
+            return
+        time.sleep(1.0)
+    raise AssertionError(f"{n} Ray nodes did not come up at {address}")
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
+def test_two_node_cluster_through_address(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ray start --head`` plus a second node on other ports: the study runs through --address and its
+    rows come from both nodes. Every process of the cluster, and this driver, share one auth token
+    (Ray 2.60 turns token authentication on by itself when ~/.ray/auth_token exists)."""
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
+    monkeypatch.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
+    port = _free_port()
+    address = f"127.0.0.1:{port}"
+    head = _start_node(["--head", f"--port={port}", "--include-dashboard=false"], tmp_path)
+    nodes = [head]
+    try:
+        _wait_for_nodes(address, 1)
+        nodes.append(_start_node([f"--address={address}"], tmp_path))
+        _wait_for_nodes(address, 2)
+        spec = from_dict({**STUDY, "seeds": 4, "grid": {}})
+        outcome, _ = run_study(spec, tmp_path / "out", address=address, progress=False)
+        rows = pd.read_parquet(tmp_path / "out" / "runs.parquet")
+        assert outcome.ran == 4 and outcome.failed == 0
+        assert rows.node.nunique() == 2, rows.node.value_counts()
+    finally:
+        for proc in reversed(nodes):
+            _stop(proc)
