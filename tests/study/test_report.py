@@ -109,8 +109,10 @@ def test_comparison_row_has_median_and_iqr_of_the_matching_finite_ok_values(tmp_
     )
     text = write_report(pd.DataFrame(rows), tmp_path, spec).read_text()
     q25, med, q75 = np.percentile(high, [25, 50, 75])
-    assert f"| Fig. 4 completion time, high grip | 6 | {med:.4g} | {q25:.4g}–{q75:.4g} | 8 | s |" in text
-    assert "| no such metric | 0 | — | — | — |  |" in text
+    mean = np.mean(high)
+    assert (f"| Fig. 4 completion time, high grip | 6 of 9 | {med:.4g} | {q25:.4g}–{q75:.4g} | {mean:.4g} | 8 | s |"
+            in text)
+    assert "| no such metric | 0 of 10 | — | — | — | — |  |" in text
 
 
 # --- distributions --------------------------------------------------------------------------------
@@ -191,7 +193,7 @@ def test_all_failed_rows_still_give_a_report(tmp_path: Path) -> None:
     text = write_report(rows, out, spec).read_text()
     assert "(ok 0, failed 3)" in text
     assert "RuntimeError: 2" in text
-    assert "| c | 0 | — | — | 1 |  |" in text
+    assert "| c | 0 of 0 | — | — | — | 1 |  |" in text
     assert not list(out.glob("*.png"))
 
 

@@ -75,22 +75,30 @@ def _out(args: argparse.Namespace, kind: str, name: str) -> Path:
         raise StudyUsageError(f"--out {out} is not writable: {exc.strerror or exc}") from exc
 
 
+def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
+    """The validated study (``sweep``) or tuning file (``tune``) and its results folder; the study extra
+    installed if missing; SIGTERM/SIGHUP turned into KeyboardInterrupt. StudyUsageError on a bad input."""
+    from lapwrench.study.spec import StudyError, load_study
+    from lapwrench.study.tune_spec import load_tune
+
+    try:
+        spec = load_study(args.study) if command == "sweep" else load_tune(args.study)
+    except StudyError as exc:
+        raise StudyUsageError(str(exc)) from exc
+    _prepare(args, command)
+    out = _out(args, "sweeps" if command == "sweep" else "tune", spec.name)
+    _stop_on_signals()
+    return spec, out
+
+
 def sweep_main(args: argparse.Namespace) -> int:
     """Run a study; exit 0 when every job ran (failed runs included, as rows), 130 when interrupted."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     try:
-        from lapwrench.study.spec import StudyError, load_study
-
-        try:
-            spec = load_study(args.study)
-        except StudyError as exc:
-            raise StudyUsageError(str(exc)) from exc
-        _prepare(args, "sweep")
-        out = _out(args, "sweeps", spec.name)
+        spec, out = _start(args, "sweep")
         from lapwrench.study.runner import ClusterError, run_study
         from lapwrench.study.table import TableError
 
-        _stop_on_signals()
         try:
             outcome, table = run_study(spec, out, address=args.address, workers=args.workers, progress=not args.quiet)
         except (TableError, ClusterError) as exc:
@@ -118,19 +126,10 @@ def tune_main(args: argparse.Namespace) -> int:
     """Search gains; exit 0 with best.yaml written, 1 when no trial met every constraint."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     try:
-        from lapwrench.study.spec import StudyError
-        from lapwrench.study.tune_spec import load_tune
-
-        try:
-            spec = load_tune(args.study)
-        except StudyError as exc:
-            raise StudyUsageError(str(exc)) from exc
-        _prepare(args, "tune")
-        out = _out(args, "tune", spec.name)
+        spec, out = _start(args, "tune")
         from lapwrench.study.runner import ClusterError
         from lapwrench.study.tune import run_tune
 
-        _stop_on_signals()
         try:
             outcome = run_tune(spec, out, address=args.address, workers=args.workers, progress=not args.quiet)
         except ClusterError as exc:

@@ -156,33 +156,37 @@ def _summary(rows: pd.DataFrame, notes: Sequence[str]) -> list[str]:
     return [line, "", *[f"- {n}" for n in notes], *([""] if notes else [])]
 
 
-def comparison_stats(rows: pd.DataFrame, comp: Comparison) -> tuple[int, float, float, float]:
-    """(n, median, q25, q75) of the comparison's metric over the matching ok rows' finite values
-    (NaN statistics when n is 0). Quantiles are numpy's default (linear interpolation)."""
+def comparison_stats(rows: pd.DataFrame, comp: Comparison) -> tuple[int, int, float, float, float, float]:
+    """(n, total, median, q25, q75, mean) of the comparison's metric: n finite values among the ``total``
+    matching ok rows (a grip run that never completed has no completion time). NaN statistics when n
+    is 0. Quantiles are numpy's default (linear interpolation); the mean of a 0/1 metric is a share."""
     ok = _ok(rows)
     mask = _column(ok, "scenario").astype(object) == comp.scenario
     if comp.run is not None:
         mask &= _column(ok, "label").astype(object) == comp.run
+    total = int(mask.sum())
     vals = _finite(numeric(_column(ok[mask], comp.metric)))
     if not vals.size:
-        return 0, np.nan, np.nan, np.nan
+        return 0, total, np.nan, np.nan, np.nan, np.nan
     q25, med, q75 = np.percentile(vals, [25.0, 50.0, 75.0])
-    return int(vals.size), float(med), float(q25), float(q75)
+    return int(vals.size), total, float(med), float(q25), float(q75), float(np.mean(vals))
 
 
 def _comparisons(rows: pd.DataFrame, spec: ReportSpec) -> list[str]:
-    """The paper's values beside the study's median and IQR."""
+    """The paper's values beside the study's median, IQR and mean."""
     if not spec.compare:
         return []
     body = []
     for comp in spec.compare:
-        n, med, q25, q75 = comparison_stats(rows, comp)
+        n, total, med, q25, q75, mean = comparison_stats(rows, comp)
         iqr = f"{text(q25)}–{text(q75)}" if n else MISSING
         paper = MISSING if comp.paper is None or not np.isfinite(comp.paper) else comp.paper
-        body.append([comp.label, n, med if n else MISSING, iqr, paper, comp.unit])
-    intro = "Median and interquartile range (25th–75th percentile) over the finished runs; n counts them."
+        body.append([comp.label, f"{n} of {total}", med if n else MISSING, iqr, mean if n else MISSING, paper,
+                     comp.unit])
+    intro = ("Median, interquartile range (25th–75th percentile) and mean over the finished runs; "
+             "n of N: runs with a value among the matching runs (a grip level never completed has none).")
     return ["## Paper beside the study", "", intro, "", *_table(
-        ["figure", "n", "median", "IQR (q25–q75)", "paper", "unit"], body), ""]
+        ["figure", "n of N", "median", "IQR (q25–q75)", "mean", "paper", "unit"], body), ""]
 
 
 def _resolve(rows: pd.DataFrame, name: str, prefix: str) -> str | None:

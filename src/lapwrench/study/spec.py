@@ -252,14 +252,21 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
     return spec
 
 
-def load_study(path: str | Path) -> StudySpec:
-    """Read and validate a study file; every problem is a :class:`StudyError` naming the file."""
+def read_file(path: str | Path, what: str) -> tuple[Any, str]:
+    """The parsed YAML of a study or tuning file and its name for messages (the config's safe reader:
+    size, encoding, aliases and tags are refused); StudyError naming the file."""
     source = cut(str(path), 100)
     try:
         data, _lines = parse(read_text(Path(path), source))
     except YamlConfigError as exc:
-        text = str(exc).replace("config file", "study file")
+        text = str(exc).replace("config file", f"{what} file")
         raise StudyError(text if source in text else f"{source}: {text}") from exc
+    return data, source
+
+
+def load_study(path: str | Path) -> StudySpec:
+    """Read and validate a study file; every problem is a :class:`StudyError` naming the file."""
+    data, source = read_file(path, "study")
     try:
         return from_dict(data, str(path))
     except StudyError as exc:

@@ -132,7 +132,8 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
     for result in grid:
         m = result.metrics or {}
         row = {**{f"p.{k}": v for k, v in (result.config or {}).items()},
-               **{k: m.get(k, math.nan) for k in ("score", "objective", "excess", "failed", "feasible")},
+               **{k: m.get(k, math.nan) for k in ("score", "objective", "excess", "failed")},
+               "feasible": m.get("feasible") in (True, 1),  # Ray may hand a bool back as 1 or numpy.bool_
                **{k: v for k, v in m.items() if k.startswith("worst.")},
                "error": None if result.error is None else str(result.error).splitlines()[0][:300]}
         trials.append(row)

@@ -25,9 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from lapwrench.config_yaml import YamlConfigError, cut, parse, read_text, short
+from lapwrench.config_yaml import short
 from lapwrench.study.space import Dist, SpaceError, check_key, is_number, parse_dist
-from lapwrench.study.spec import StudyError, StudySpec
+from lapwrench.study.spec import StudyError, StudySpec, read_file
 from lapwrench.study.spec import from_dict as study_from_dict
 
 MAX_TRIALS = 10_000
@@ -121,14 +121,7 @@ def from_dict(data: Any, source: str = "tune") -> TuneSpec:
 
 def load_tune(path: str) -> TuneSpec:
     """Read and validate a tuning file; every problem is a :class:`StudyError` naming the file."""
-    from pathlib import Path
-
-    source = cut(str(path), 100)
-    try:
-        data, _ = parse(read_text(Path(path), source))
-    except YamlConfigError as exc:
-        text = str(exc).replace("config file", "tuning file")
-        raise StudyError(text if source in text else f"{source}: {text}") from exc
+    data, source = read_file(path, "tuning")
     try:
         return from_dict(data, str(path))
     except StudyError as exc:

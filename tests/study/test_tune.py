@@ -1,0 +1,73 @@
+"""lapwrench.study.tune: how a trial is scored (feasible beats infeasible, failures break every
+constraint), its jobs, and one real evaluation without Ray (the Ray Tune run itself is exercised
+end to end in tests/study/test_cli.py)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from lapwrench import config as config_mod
+from lapwrench.study.tune import PENALTY, Evaluation, config_jobs, evaluate, score_rows
+from lapwrench.study.tune_spec import from_dict
+
+SPEC = from_dict({
+    "name": "t", "scenarios": ["grip", "rcm-disturbance"], "seeds": [0, 1], "time_scale": 0.05,
+    "detector": "projected", "search": {"viscous.k_t": {"uniform": [100, 200]}},
+    "objective": {"metric": "duration_s", "reduce": "max"},
+    "constraints": [{"metric": "rcm_error_max_mm", "max": 1.0}],
+})
+
+
+def _row(run_id: str, status: str = "ok", **metrics: float) -> dict:
+    return {"run_id": run_id, "status": status, **{f"m.{k}": v for k, v in metrics.items()}}
+
+
+def test_a_feasible_trial_scores_its_objective() -> None:
+    ev = score_rows([_row("a", duration_s=2.0, rcm_error_max_mm=0.5), _row("b", duration_s=3.0, rcm_error_max_mm=0.9)],
+                    SPEC)
+    assert ev.feasible and ev.objective == 3.0 and ev.score == 3.0  # reduce: max
+    assert ev.worst == {"m.rcm_error_max_mm": 0.9}
+
+
+def test_an_infeasible_trial_scores_worse_than_any_feasible_one() -> None:
+    bad = score_rows([_row("a", duration_s=0.1, rcm_error_max_mm=1.5)], SPEC)
+    assert not bad.feasible
+    assert bad.excess == pytest.approx(0.5)
+    assert bad.score == pytest.approx(PENALTY * 1.5)
+    worse = score_rows([_row("a", duration_s=0.1, rcm_error_max_mm=3.0)], SPEC)
+    assert worse.score > bad.score > Evaluation(1e5, 0.0, 0, {}).score
+
+
+def test_a_failed_run_or_a_missing_metric_breaks_the_constraints() -> None:
+    failed = score_rows([_row("a", duration_s=1.0, rcm_error_max_mm=0.1), _row("b", status="failed")], SPEC)
+    assert failed.failed == 1 and not failed.feasible and failed.score >= 2 * PENALTY
+    missing = score_rows([_row("a", duration_s=1.0)], SPEC)
+    assert not missing.feasible and missing.excess == 1.0 and math.isnan(missing.worst["m.rcm_error_max_mm"])
+    empty = score_rows([], SPEC)
+    assert not empty.feasible and math.isnan(empty.objective)
+
+
+def test_config_jobs_cover_every_scenario_and_seed_with_the_given_config() -> None:
+    cfg = config_mod.load().replace(viscous={"k_t": 123.0})
+    jobs = config_jobs(SPEC, cfg, {"viscous.k_t": 123.0})
+    assert {(j.scenario, j.seed) for j in jobs} == {(s, k) for s in ("grip", "rcm-disturbance") for k in (0, 1)}
+    assert all(j.config["viscous"]["k_t"] == 123.0 and j.time_scale == 0.05 for j in jobs)
+    assert len({j.run_id for j in jobs}) == 4
+
+
+@pytest.mark.slow
+def test_evaluate_runs_the_scenarios_and_a_tight_bound_fails() -> None:
+    ev, rows = evaluate(SPEC, {"viscous.k_t": 150.0})
+    assert {r["scenario"] for r in rows} == {"grip", "rcm-disturbance"}
+    assert all(r["status"] == "ok" for r in rows)
+    assert math.isfinite(ev.objective) and ev.objective >= 6.0  # rcm-disturbance runs at least 6 s
+    tight = from_dict({**_raw(), "constraints": [{"metric": "rcm_error_max_mm", "max": 1e-9}]})
+    assert not score_rows(rows, tight).feasible
+
+
+def _raw() -> dict:
+    return {"name": "t", "scenarios": ["grip", "rcm-disturbance"], "seeds": [0, 1], "time_scale": 0.05,
+            "detector": "projected", "search": {"viscous.k_t": {"uniform": [100, 200]}},
+            "objective": {"metric": "duration_s", "reduce": "max"}}
