@@ -1,21 +1,24 @@
 """Benchmark: how a sweep scales on Ray and what Ray costs per run (issue 14).
 
-The same jobs run three ways in one run of this script:
+The same jobs run four ways in one run of this script:
 
 1. **direct**: one after another in this process, no Ray (:func:`lapwrench.study.execute.run_job`, the
    code a Ray task runs), after one warm-up job, so imports and the numba cache are already loaded;
-2. **Ray, 1 worker**: ``run_study`` on an embedded Ray with 1 CPU, from ``ray.init`` to ``ray.shutdown``;
-3. **Ray, 2 workers**: the same with 2 CPUs.
+2. **2 plain processes, no Ray** (each imports, warms up and runs half the jobs): what this machine's two
+   cores give two workers without Ray, the ceiling for the next two;
+3. **Ray, 1 worker**: ``run_study`` on an embedded Ray with 1 CPU, from ``ray.init`` to ``ray.shutdown``;
+4. **Ray, 2 workers**: the same with 2 CPUs.
 
 A job is ``rcm-disturbance`` at time scale 10/12: its two runs (with and without adaptation) are each a
-10-second scenario. Throughput is jobs per wall second; Ray's overhead per run is
-``(Ray 1-worker wall - direct wall) / runs``, so it includes Ray's start, the worker's start and
-imports (spread over the runs) and every task's round trip, against a 10-second scenario's wall time.
+10-second scenario. Throughput is jobs per wall second. Ray's overhead is read from the workers' own
+timestamps (every row has the job's start and wall time), so the machine's speed, which drifts by 20 %
+here from minute to minute, does not enter it: per run, the round trip from one job's end to the next
+one's start in the 1-worker run; once per study, the time before the first job starts (Ray's start, the
+worker's boot) and all the 1-worker wall time spent outside jobs.
 
-    python bench/sweep.py [--jobs N]
+    python bench/sweep.py [--jobs N] [--rounds R]
 
-Ray's own start (``ray.init`` to ``ray.shutdown`` with no task) is measured alone too, and the overhead
-and the throughput ratio are also given without it: a long study pays it once.
+Direct and both Ray runs alternate in each round; the figures are medians over the rounds.
 
 Targets (issue 14): 2 workers give >= 1.8x the throughput of 1; Ray's overhead per run <= 5 % of a
 10-second scenario. Last line: one JSON object.
@@ -31,8 +34,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import statistics  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from lapwrench.study.execute import run_job  # noqa: E402
@@ -59,68 +64,103 @@ def direct(spec: StudySpec) -> float:
     return time.perf_counter() - t0
 
 
-def on_ray(spec: StudySpec, workers: int) -> float:
-    """Wall seconds of ``run_study`` with an embedded Ray of ``workers`` CPUs (start and shutdown included)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        outcome, _ = run_study(spec, Path(tmp), workers=workers, progress=False)
-        wall = time.perf_counter() - t0
-    assert outcome.ran == len(expand(spec)) and outcome.failed == 0, outcome
-    return wall
+def _job_list(seeds: list[int]) -> int:
+    spec = from_dict({"name": "bench", "scenarios": ["rcm-disturbance"], "seeds": seeds, "time_scale": TIME_SCALE,
+                      "detector": "projected"})
+    warm = from_dict({"name": "warm", "scenarios": ["rcm-disturbance"], "seeds": [999], "time_scale": 0.05})
+    run_job(expand(warm)[0], "warm")
+    return sum(len(run_job(job, "bench")) for job in expand(spec))
 
 
-def ray_start_stop() -> float:
-    """Wall seconds to start an embedded Ray with 1 CPU and shut it down, with no task."""
-    import ray
+def two_processes(spec: StudySpec) -> float:
+    """Wall seconds for the jobs of ``spec`` split over 2 plain processes (no Ray), each warmed up first
+    like :func:`direct`: the machine's own ceiling for 2 workers."""
+    import multiprocessing as mp
 
-    from lapwrench.study.runner import start_ray
-
+    seeds = sorted({j.seed for j in expand(spec)})
+    halves = [seeds[0::2], seeds[1::2]]
+    ctx = mp.get_context("spawn")
     t0 = time.perf_counter()
-    start_ray(None, 1)
-    ray.shutdown()
+    with ctx.Pool(2) as pool:
+        pool.map(_job_list, halves)
     return time.perf_counter() - t0
+
+
+@dataclass
+class RayRun:
+    wall_s: float  # run_study, from the call to its return (Ray's start and shutdown included)
+    inside_s: float  # the jobs' own time inside the workers, summed
+    first_start_s: float  # from the call to the first job's start in a worker (Ray start, worker boot)
+    gaps_s: list[float]  # 1 worker: from one job's end to the next one's start (the per-task round trip)
+
+
+def on_ray(spec: StudySpec, workers: int) -> RayRun:
+    """``run_study`` with an embedded Ray of ``workers`` CPUs, timed from outside and from the workers'
+    own timestamps (``started_unix_s`` and ``wall_s`` of every job)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0_unix, t0 = time.time(), time.perf_counter()
+        outcome, table = run_study(spec, Path(tmp), workers=workers, progress=False)
+        wall = time.perf_counter() - t0
+        jobs = table.frame().drop_duplicates("run_id").sort_values("started_unix_s")
+    assert outcome.ran == len(expand(spec)) and outcome.failed == 0, outcome
+    starts, walls = jobs["started_unix_s"].to_numpy(), jobs["wall_s"].to_numpy()
+    gaps = [float(starts[k + 1] - (starts[k] + walls[k])) for k in range(len(starts) - 1)]
+    return RayRun(wall, float(walls.sum()), float(starts[0] - t0_unix), gaps)
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--jobs", type=int, default=8, help="jobs per measurement (default 8; even, >= 2)")
+    p.add_argument("--rounds", type=int, default=2, help="rounds of direct / Ray 1 / Ray 2, medians taken (default 2)")
     args = p.parse_args()
-    if args.jobs < 2 or args.jobs % 2:
-        p.error("--jobs must be an even number >= 2")
+    if args.jobs < 2 or args.jobs % 2 or args.rounds < 1:
+        p.error("--jobs must be an even number >= 2 and --rounds >= 1")
     spec = study(args.jobs)
     runs = args.jobs * RUNS_PER_JOB
-    d = direct(spec)
-    print(f"direct, no Ray:   {args.jobs} jobs in {d:6.1f} s ({d / runs:.2f} s per 10-second run)", flush=True)
-    r1 = on_ray(spec, 1)
-    print(f"Ray, 1 worker:    {args.jobs} jobs in {r1:6.1f} s", flush=True)
-    r2 = on_ray(spec, 2)
-    print(f"Ray, 2 workers:   {args.jobs} jobs in {r2:6.1f} s", flush=True)
-    boot = ray_start_stop()
-    print(f"Ray start + shutdown alone: {boot:.1f} s", flush=True)
+    ds, ones, twos = [], [], []
+    for k in range(args.rounds):
+        ds.append(direct(spec))
+        ones.append(on_ray(spec, 1))
+        twos.append(on_ray(spec, 2))
+        one, two = ones[-1], twos[-1]
+        print(f"round {k + 1}: direct {ds[-1]:6.1f} s; Ray 1 worker {one.wall_s:6.1f} s "
+              f"(jobs inside {one.inside_s:6.1f} s, first job began after {one.first_start_s:.1f} s, "
+              f"median gap between jobs {statistics.median(one.gaps_s) * 1e3:.0f} ms); "
+              f"Ray 2 workers {two.wall_s:6.1f} s", flush=True)
+    d = statistics.median(ds)
+    r1, r2 = (statistics.median(r.wall_s for r in rs) for rs in (ones, twos))
+    first = statistics.median(r.first_start_s for r in ones)
+    gap = statistics.median(g for r in ones for g in r.gaps_s)
+    fixed = statistics.median(r.wall_s - r.inside_s for r in ones)  # everything that is not a job's own time
+    p2 = two_processes(spec)
+    print(f"2 processes, no Ray (start and warm-up included): {p2:6.1f} s ({d / p2:.2f}x direct)", flush=True)
+    run_s = d / runs
+    per_run = gap / RUNS_PER_JOB  # a job holds two 10-second runs
     speedup = r1 / r2
-    overhead = (r1 - d) / runs
-    fraction = overhead / (d / runs)
-    steady = (r1 - boot - d) / runs  # without the cluster's own start, which a long study pays once
-    steady_speedup = (r1 - boot) / (r2 - boot)
-    print(f"throughput 2 workers / 1 worker: {speedup:.2f}x (target >= 1.8x); without Ray's own start "
-          f"(paid once per study): {steady_speedup:.2f}x")
-    print(f"Ray overhead per run: {overhead * 1e3:.0f} ms = {fraction:.1%} of a 10-second scenario's "
-          f"{d / runs:.2f} s (target <= 5 %); without Ray's own start: {steady * 1e3:.0f} ms = "
-          f"{steady / (d / runs):.1%}")
+    print(f"medians of {args.rounds} rounds, {args.jobs} jobs ({runs} runs of 10 s simulated, {run_s:.2f} s each):")
+    print(f"throughput 2 workers / 1 worker: {speedup:.2f}x (target >= 1.8x); two plain processes, no Ray, in the "
+          f"same run: {d / p2:.2f}x one")
+    print(f"Ray's overhead per run (round trip between two jobs in the 1-worker run, per 10-second run): "
+          f"{per_run * 1e3:.1f} ms = {per_run / run_s:.2%} of a run (target <= 5 %)")
+    print(f"once per study: {first:.1f} s before the first job starts (Ray's start, the worker's boot), "
+          f"{fixed:.1f} s of the 1-worker wall outside the jobs in all ({fixed / runs * 1e3:.0f} ms per run over "
+          f"{runs} runs = {fixed / runs / run_s:.1%})")
     print(json.dumps({
         "jobs": args.jobs,
         "runs": runs,
+        "rounds": args.rounds,
         "run_sim_s": 10.0,
-        "direct_run_wall_s": round(d / runs, 3),
+        "direct_run_wall_s": round(run_s, 3),
         "ray_1_worker_wall_s": round(r1, 2),
         "ray_2_workers_wall_s": round(r2, 2),
+        "two_processes_no_ray_over_one_ratio": round(d / p2, 3),
         "throughput_2_over_1_ratio": round(speedup, 3),
-        "throughput_2_over_1_without_start_ratio": round(steady_speedup, 3),
-        "ray_overhead_per_run_ms": round(overhead * 1e3, 1),
-        "ray_overhead_fraction_of_10s_run": round(fraction, 4),
-        "ray_start_stop_s": round(boot, 2),
-        "ray_overhead_without_start_per_run_ms": round(steady * 1e3, 1),
-        "ray_overhead_without_start_fraction_of_10s_run": round(steady / (d / runs), 4),
+        "ray_gap_between_jobs_ms": round(gap * 1e3, 2),
+        "ray_overhead_per_run_ms": round(per_run * 1e3, 2),
+        "ray_overhead_per_run_fraction": round(per_run / run_s, 5),
+        "ray_first_job_start_s": round(first, 2),
+        "ray_outside_jobs_per_study_s": round(fixed, 2),
+        "ray_outside_jobs_per_run_fraction": round(fixed / runs / run_s, 4),
     }))
 
 

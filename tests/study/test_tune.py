@@ -41,8 +41,10 @@ def test_an_infeasible_trial_scores_worse_than_any_feasible_one() -> None:
 
 
 def test_a_failed_run_or_a_missing_metric_breaks_the_constraints() -> None:
-    failed = score_rows([_row("a", duration_s=1.0, rcm_error_max_mm=0.1), _row("b", status="failed")], SPEC)
+    stop = {**_row("b", status="failed"), "error": "SafetyStopError: stopped at t = 1.000 s"}
+    failed = score_rows([_row("a", duration_s=1.0, rcm_error_max_mm=0.1), stop], SPEC)
     assert failed.failed == 1 and not failed.feasible and failed.score >= 2 * PENALTY
+    assert failed.first_error == "SafetyStopError: stopped at t = 1.000 s"
     missing = score_rows([_row("a", duration_s=1.0)], SPEC)
     assert not missing.feasible and missing.excess == 1.0 and math.isnan(missing.worst["m.rcm_error_max_mm"])
     empty = score_rows([], SPEC)

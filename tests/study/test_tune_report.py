@@ -143,3 +143,13 @@ def test_numpy_true_counts_as_feasible(tmp_path: Path) -> None:
     trials = [_trial(120.0, 6.5, 0.0, np.bool_(True))]
     text = write_tune_report(trials, SPEC, tmp_path, best_config=tmp_path / "b.yaml", check=None).read_text()
     assert "**1 of 1 trials met every constraint.**" in text
+
+
+def test_a_trial_with_a_failed_run_lists_that_failure(tmp_path: Path) -> None:
+    failed = {**_trial(90.0, math.nan, 1.0, False), "failed": 1,
+              "run_error": "SafetyStopError: safety supervisor stopped the robot at t = 1.234 s: rcm"}
+    text = write_tune_report([*TRIALS, failed], SPEC, tmp_path, best_config=None, check=None).read_text()
+    section = text.split("## Trials with a failed run", 1)[1]
+    assert "- SafetyStopError: safety supervisor stopped the robot at t = 1.234 s: rcm" in section
+    assert "## Trials with a failed run" not in write_tune_report(TRIALS, SPEC, tmp_path, best_config=None,
+                                                                   check=None).read_text()

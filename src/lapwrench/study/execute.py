@@ -52,12 +52,15 @@ def one_line(exc: BaseException) -> str:
     return text if len(text) <= MAX_ERROR_CHARS else text[: MAX_ERROR_CHARS - 3] + "..."
 
 
-def job_rows(job: Job, study: str, result: ScenarioResult | None, error: str | None, wall: float) -> list[dict]:
-    """The rows of one job: one per run of its scenario, or one failed row."""
+def job_rows(job: Job, study: str, result: ScenarioResult | None, error: str | None, wall: float,
+             started: float | None = None) -> list[dict]:
+    """The rows of one job: one per run of its scenario, or one failed row. ``started``: when the job
+    began (Unix time, s), ``wall``: how long it took (s)."""
     base: dict[str, Any] = {
         "run_id": job.run_id, "study": study, "scenario": job.scenario, "seed": job.seed,
         **{f"p.{k}": v for k, v in job.params.items()},
-        "wall_s": wall, "config": yaml.safe_dump(job.config, sort_keys=False),
+        "wall_s": wall, "started_unix_s": math.nan if started is None else started,
+        "config": yaml.safe_dump(job.config, sort_keys=False),
     }
     if result is None:
         return [{**base, "label": None, "status": "failed", "error": error}]
@@ -68,12 +71,12 @@ def job_rows(job: Job, study: str, result: ScenarioResult | None, error: str | N
 
 def run_job(job: Job, study: str) -> list[dict]:
     """Run ``job`` and return its rows (:func:`job_rows`); any exception becomes a failed row."""
-    t0 = time.perf_counter()
+    started, t0 = time.time(), time.perf_counter()
     try:
         cfg = config_mod.from_dict(job.config)
         opts = ScenarioOptions(seed=job.seed, time_scale=job.time_scale, detector=job.detector,
                                world=WorldVariation.from_dict(job.world))
         result = SCENARIOS[job.scenario](cfg, opts)
     except Exception as exc:
-        return job_rows(job, study, None, one_line(exc), time.perf_counter() - t0)
-    return job_rows(job, study, result, None, time.perf_counter() - t0)
+        return job_rows(job, study, None, one_line(exc), time.perf_counter() - t0, started)
+    return job_rows(job, study, result, None, time.perf_counter() - t0, started)

@@ -34,6 +34,7 @@ class Evaluation:
     excess: float  # summed relative excess over the constraints (0: all hold)
     failed: int  # jobs that failed
     worst: dict[str, float]  # per constraint metric, the worst value over the rows
+    first_error: str | None = None  # the error of the first failed job, if any
 
     @property
     def feasible(self) -> bool:
@@ -64,7 +65,8 @@ def score_rows(rows: list[dict], spec: TuneSpec) -> Evaluation:
         finite = [v for v in values if math.isfinite(v)]
         worst[c.metric] = max(finite) if finite else math.nan
         excess += sum(c.excess(v) for v in values)
-    return Evaluation(objective, excess, failed, worst)
+    first_error = next((str(r.get("error")) for r in rows if r["status"] == "failed"), None)
+    return Evaluation(objective, excess, failed, worst, first_error)
 
 
 def config_jobs(spec: TuneSpec, cfg: config_mod.Config, params: dict[str, Any]) -> list[Job]:
@@ -93,7 +95,8 @@ def _trainable(spec: TuneSpec) -> Any:
     def trial(params: dict[str, Any]) -> None:
         ev, _rows = evaluate(spec, params)
         tune.report({"score": ev.score, "objective": ev.objective, "excess": ev.excess, "failed": ev.failed,
-                     "feasible": ev.feasible, **{f"worst.{k}": v for k, v in ev.worst.items()}})
+                     "feasible": ev.feasible, "first_error": ev.first_error or "",
+                     **{f"worst.{k}": v for k, v in ev.worst.items()}})
 
     return trial
 
@@ -135,6 +138,7 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
                **{k: m.get(k, math.nan) for k in ("score", "objective", "excess", "failed")},
                "feasible": m.get("feasible") in (True, 1),  # Ray may hand a bool back as 1 or numpy.bool_
                **{k: v for k, v in m.items() if k.startswith("worst.")},
+               "run_error": m.get("first_error") or None,  # a failed scenario run inside the trial
                "error": None if result.error is None else str(result.error).splitlines()[0][:300]}
         trials.append(row)
     trials.sort(key=lambda r: (r["score"] if isinstance(r["score"], float) and math.isfinite(r["score"]) else math.inf))

@@ -88,6 +88,10 @@ def write_tune_report(trials: Sequence[dict[str, Any]], spec: TuneSpec, out: Pat
         cells = [str(i + 1), *[_fmt(t.get(k)) for k in keys], "yes" if t.get("feasible") in (True, np.True_) else "no",
                  _fmt(t.get("objective")), *[_fmt(t.get(w)) for w in worst]]
         lines.append("| " + " | ".join(cells) + " |")
+    failed_runs = [t for t in trials if t.get("run_error")]
+    if failed_runs:
+        lines += ["", "## Trials with a failed run (the first failure of each)", ""]
+        lines += [f"- {' '.join(str(t['run_error']).split())[:300]}" for t in failed_runs]
     errors = [t for t in trials if t.get("error")]
     if errors:
         lines += ["", "## Trials that raised", ""]
