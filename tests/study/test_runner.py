@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+import yaml
 
 from lapwrench.study.runner import ClusterError, check_reachable, run_study
 from lapwrench.study.spec import from_dict
@@ -109,8 +110,8 @@ def _stop(proc: subprocess.Popen) -> None:
 
 
 def test_two_node_cluster_through_address(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``ray start --head`` plus a second node on other ports: the study runs through --address and its
-    rows come from both nodes. Every process of the cluster, and this driver, share one auth token
+    """``ray start --head`` plus a second node on other ports: the study runs through ``lapwrench sweep
+    --address`` and its rows come from both nodes. Every process of the cluster, and this driver, share one auth token
     (Ray 2.60 turns token authentication on by itself when ~/.ray/auth_token exists)."""
     monkeypatch.setenv("RAY_AUTH_MODE", "token")
     monkeypatch.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
@@ -122,10 +123,18 @@ def test_two_node_cluster_through_address(tmp_path: Path, monkeypatch: pytest.Mo
         _wait_for_nodes(address, 1)
         nodes.append(_start_node([f"--address={address}"], tmp_path))
         _wait_for_nodes(address, 2)
-        spec = from_dict({**STUDY, "seeds": 4, "grid": {}})
-        outcome, _ = run_study(spec, tmp_path / "out", address=address, progress=False)
-        rows = pd.read_parquet(tmp_path / "out" / "runs.parquet")
-        assert outcome.ran == 4 and outcome.failed == 0
+        # The driver is `lapwrench sweep --address` in a process of its own: Ray keeps the auth token of
+        # the first ray.init of a process, and this test process may have run Ray before.
+        study = tmp_path / "study.yaml"
+        study.write_text(yaml.safe_dump({**STUDY, "seeds": 4, "grid": {}}))
+        out = tmp_path / "out"
+        proc = subprocess.run([sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(out),
+                               "--address", address, "--quiet"], capture_output=True, text=True, timeout=600,
+                              env={**os.environ, "MUJOCO_GL": "egl"})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert "ran 4 jobs (0 failed)" in proc.stdout and "on 2 node(s)" in proc.stdout, proc.stdout
+        rows = pd.read_parquet(out / "runs.parquet")
+        assert rows.run_id.nunique() == 4 and (rows.status == "ok").all()
         assert rows.node.nunique() == 2, rows.node.value_counts()
     finally:
         for proc in reversed(nodes):

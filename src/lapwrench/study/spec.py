@@ -197,13 +197,19 @@ def _base(value: Any) -> config_mod.Config:
         raise StudyError(f"'config': {exc}") from exc
 
 
+def check_top(data: Any, known: set[str], what: str) -> dict[str, Any]:
+    """``data`` if it is a mapping of known keys; StudyError naming the first unknown one."""
+    if not isinstance(data, dict):
+        raise StudyError(f"a {what} is a mapping with {', '.join(sorted(known))}")
+    unknown = sorted(set(data) - known, key=str)
+    if unknown:
+        raise StudyError(f"unknown key {short(unknown[0])} (known: {', '.join(sorted(known))})")
+    return data
+
+
 def from_dict(data: Any, source: str = "study") -> StudySpec:
     """Validate a parsed study and build its :class:`StudySpec`."""
-    if not isinstance(data, dict):
-        raise StudyError("a study is a mapping with scenarios, seeds, grid, sample, ...")
-    unknown = sorted(set(data) - TOP_KEYS, key=str)
-    if unknown:
-        raise StudyError(f"unknown key {short(unknown[0])} (known: {', '.join(sorted(TOP_KEYS))})")
+    data = check_top(data, TOP_KEYS, "study")
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name.strip():
         raise StudyError(f"'name' must be text, got {short(name)}")

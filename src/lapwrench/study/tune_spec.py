@@ -27,7 +27,7 @@ from typing import Any
 
 from lapwrench.config_yaml import short
 from lapwrench.study.space import Dist, SpaceError, check_key, is_number, parse_dist
-from lapwrench.study.spec import StudyError, StudySpec, read_file
+from lapwrench.study.spec import StudyError, StudySpec, check_top, read_file
 from lapwrench.study.spec import from_dict as study_from_dict
 
 MAX_TRIALS = 10_000
@@ -92,11 +92,7 @@ def _constraints(data: Any) -> tuple[Constraint, ...]:
 
 def from_dict(data: Any, source: str = "tune") -> TuneSpec:
     """Validate a parsed tuning file and build its :class:`TuneSpec`."""
-    if not isinstance(data, dict):
-        raise StudyError("a tuning file is a mapping with scenarios, search, objective, ...")
-    unknown = sorted(set(data) - TOP_KEYS, key=str)
-    if unknown:
-        raise StudyError(f"unknown key {short(unknown[0])} (known: {', '.join(sorted(TOP_KEYS))})")
+    data = check_top(data, TOP_KEYS, "tuning file")
     shared = {k: data[k] for k in ("name", "scenarios", "seeds", "config", "time_scale", "detector") if k in data}
     study = study_from_dict(shared, source)
     trials = data.get("trials", 8)
