@@ -11,12 +11,12 @@ import pytest
 from lapwrench.config import load
 from lapwrench.perception.detection import Detection
 from lapwrench.sim.hard_push import ConstantPush
-from lapwrench.sim.loop import DETECTION_LATENCY, ClosedLoop, Trace
+from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.results import DEFAULT_OPTIONS, ScenarioOptions, ScenarioResult
 from lapwrench.sim.scenarios import grip, rcm_disturbance
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, SpeedDrivenHand
-from lapwrench.sim.variation import CorruptedDetector, WorldVariation
+from lapwrench.sim.variation import DETECTION_LATENCY, CorruptedDetector, WorldVariation
 from lapwrench.sim.world import CONTROL_DT
 
 CFG = load()

@@ -37,10 +37,6 @@ from lapwrench.sim.world import CONTROL_DT, SimWorld
 from lapwrench.sources import Observable, Source, simulated_input
 from lapwrench.wrenches.registry import input_specs
 
-# Modelled capture-to-use delay of a detection (s): one frame period at 25 fps. The shipped model's
-# inference (two passes) is 9 ms in bench/detect.py and about 17 ms inside the simulated loop
-# (sharing the CPU with physics and rendering); the rest stands for exposure, transfer, scheduling.
-DETECTION_LATENCY = 0.04
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
 
 # Franka-like joint torque sensing imperfections behind the external force estimate: white noise, and

@@ -26,6 +26,11 @@ from lapwrench.sim.surgeon import HandGuide
 
 H = TypeVar("H")
 
+# Modelled capture-to-use delay of a detection (s): one frame period at 25 fps. The shipped model's
+# inference (two passes) is 9 ms in bench/detect.py and about 17 ms inside the simulated loop
+# (sharing the CPU with physics and rendering); the rest stands for exposure, transfer, scheduling.
+DETECTION_LATENCY = 0.04
+
 _SCALES = ("surgeon_force", "surgeon_speed", "surgeon_grip", "trocar_stiffness")  # positive factors
 _AT_LEAST_ZERO = ("incision_shift_mm", "detector_latency_s", "detector_noise_px")
 
@@ -44,7 +49,7 @@ class WorldVariation:
             the incision.
         incision_shift_mm: size (mm) of the housing shift of the rcm-disturbance scenario (Fig. 5).
         detector_latency_s: capture-to-use latency (s) of the simulated detector
-            (= :data:`lapwrench.sim.loop.DETECTION_LATENCY` by default).
+            (:data:`DETECTION_LATENCY` by default).
         detector_dropout: probability in [0, 1) that a frame's detections are all lost.
         detector_noise_px: σ (px) of the Gaussian noise on each detection's image point.
     """
@@ -54,14 +59,11 @@ class WorldVariation:
     surgeon_grip: float = 1.0
     trocar_stiffness: float = 1.0
     incision_shift_mm: float = 10.0
-    detector_latency_s: float = 0.04
+    detector_latency_s: float = DETECTION_LATENCY
     detector_dropout: float = 0.0
     detector_noise_px: float = 0.0
 
-    FIELDS: ClassVar[tuple[str, ...]] = (
-        "surgeon_force", "surgeon_speed", "surgeon_grip", "trocar_stiffness",
-        "incision_shift_mm", "detector_latency_s", "detector_dropout", "detector_noise_px",
-    )
+    FIELDS: ClassVar[tuple[str, ...]]  # the field names, in order (set below the class)
 
     def __post_init__(self) -> None:
         """Check every field (one-line ValueError naming it) and store it as a float, so equal
@@ -150,6 +152,9 @@ class WorldVariation:
             return ""
         return (f" (corrupted: frames dropped with p = {self.detector_dropout:g}, "
                 f"point noise σ = {self.detector_noise_px:g} px)")
+
+
+WorldVariation.FIELDS = tuple(f.name for f in fields(WorldVariation))
 
 
 class CorruptedDetector:
