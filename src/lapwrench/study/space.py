@@ -16,6 +16,7 @@ A random key is a :class:`Dist`: ``{uniform: [a, b]}``, ``{loguniform: [a, b]}``
 from __future__ import annotations
 
 import copy
+import json
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -160,12 +161,17 @@ def apply(base: config_mod.Config, params: dict[str, Any]) -> tuple[config_mod.C
     return cfg, variation
 
 
-def check_key(base: config_mod.Config, key: str, values: tuple[Any, ...]) -> None:
-    """Apply each of ``values`` to ``key`` alone: a bad key or value fails here, before any run."""
+def check_key(base: config_mod.Config, key: str, values: tuple[Any, ...]) -> list[str]:
+    """Apply each of ``values`` to ``key`` alone: a bad key or value fails here, before any run.
+    Returns what each value resolves to (the configuration and world as sorted JSON), so two values
+    that mean the same (100 and 100.0) can be told apart from two that differ."""
     if not isinstance(key, str) or not key:
         raise SpaceError(f"parameter keys are dotted names such as interaction.k_t, got {short(key)}")
+    resolved = []
     for v in values:
         try:
-            apply(base, {key: v})
+            cfg, world = apply(base, {key: v})
         except SpaceError as exc:
             raise SpaceError(f"'{key}' = {short(v)}: {exc}") from exc
+        resolved.append(json.dumps([config_mod.to_dict(cfg), world.to_dict()], sort_keys=True, default=str))
+    return resolved

@@ -27,6 +27,7 @@ a problem is a :class:`StudyError` naming the file and the key.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -235,9 +236,7 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
         for key, values in grid_in.items():
             if not isinstance(values, list) or not values:
                 raise SpaceError(f"'{key}' must list its values, got {short(values)}")
-            check_key(base, key, tuple(values))
-            resolved = [json.dumps(apply(base, {key: v})[1].to_dict() if str(key).startswith("world.")
-                                   else config_mod.to_dict(apply(base, {key: v})[0]), sort_keys=True) for v in values]
+            resolved = check_key(base, key, tuple(values))
             if len(set(resolved)) != len(resolved):
                 raise SpaceError(f"'{key}' lists the same value twice")
             grid[key] = tuple(values)
@@ -248,11 +247,9 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
             check_key(base, key, sample[key].corners())
     except SpaceError as exc:
         raise StudyError(f"{'grid' if key in grid_in else 'sample'}: {exc}") from exc
-    report = _report(data.get("report"), name)
+    report = dataclasses.replace(_report(data.get("report"), name), params=(*grid, *sample))
     spec = StudySpec(name.strip(), tuple(scenarios), _seeds(data.get("seeds", 1)), base, float(ts), detector,
                      grid, sample, report)
-    spec = StudySpec(**{**spec.__dict__, "report": ReportSpec(report.title, spec.params, report.metrics,
-                                                              report.pareto, report.compare)})
     if spec.n_jobs() > MAX_JOBS:
         raise StudyError(f"{spec.n_jobs()} runs: more than {MAX_JOBS}; narrow the grid or the seeds")
     return spec
