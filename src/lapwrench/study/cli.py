@@ -47,8 +47,13 @@ def _prepare(args: argparse.Namespace, command: str) -> None:
 
     if args.address is not None and args.workers is not None:
         raise StudyUsageError("--workers sizes the embedded Ray; a cluster at --address has its own CPUs")
-    if args.address is not None and (not args.address.strip() or len(args.address) > 300):
-        raise StudyUsageError("--address must be HOST:PORT of a Ray head node, or 'auto'")
+    if args.address is not None:  # its form, before anything is installed (reachability: when Ray starts)
+        from lapwrench.study.runner import ClusterError, parse_address
+
+        try:
+            parse_address(args.address)
+        except ClusterError as exc:
+            raise StudyUsageError(str(exc)) from exc
     try:
         setup.ensure(command)
     except setup.SetupError as exc:

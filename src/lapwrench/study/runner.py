@@ -47,16 +47,25 @@ class SweepOutcome:
     interrupted: bool = False
 
 
-def check_reachable(address: str, timeout_s: float = 3.0) -> None:
-    """ClusterError unless ``HOST:PORT`` accepts a TCP connection within ``timeout_s`` (Ray itself
-    retries an unreachable address for minutes). ``auto`` is left to Ray."""
+def parse_address(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a Ray head node's ``HOST:PORT`` (``ray://`` allowed), None for ``auto``;
+    ClusterError naming the argument otherwise."""
     if address == "auto":
-        return
+        return None
     host, sep, port = address.removeprefix("ray://").rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
         raise ClusterError(f"--address {address[:80]!r} is not HOST:PORT of a Ray head node")
+    return host.strip("[]"), int(port)
+
+
+def check_reachable(address: str, timeout_s: float = 3.0) -> None:
+    """ClusterError unless ``HOST:PORT`` accepts a TCP connection within ``timeout_s`` (Ray itself
+    retries an unreachable address for minutes). ``auto`` is left to Ray."""
+    target = parse_address(address)
+    if target is None:
+        return
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+        socket.create_connection(target, timeout=timeout_s).close()
     except OSError as exc:
         raise ClusterError(f"cannot reach the Ray cluster at {address[:80]}: {exc.strerror or exc}") from exc
 
