@@ -26,10 +26,9 @@ def to_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     numbers, say) is stored as text; cells that are missing stay missing."""
     frame = pd.DataFrame(rows)
     for col in frame.columns:
-        values = [v for v in frame[col] if v is not None and not (isinstance(v, float) and math.isnan(v))]
-        kinds = {type(v) for v in values}
+        kinds = {type(v) for v in frame[col] if not _missing(v)}
         if str in kinds and len(kinds) > 1:
-            frame[col] = [None if v is None or (isinstance(v, float) and math.isnan(v)) else str(v) for v in frame[col]]
+            frame[col] = [None if _missing(v) else str(v) for v in frame[col]]
     return frame
 
 

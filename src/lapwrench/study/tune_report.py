@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from lapwrench.study.plots import text
 from lapwrench.study.tune_spec import TuneSpec
 
 SHOWN_TRIALS = 20
@@ -18,10 +19,9 @@ def _num(x: Any) -> float:
     return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else math.nan
 
 
-def _fmt(x: Any) -> str:
-    if isinstance(x, bool) or not isinstance(x, int | float):
-        return "—" if x is None else str(x)
-    return "—" if not math.isfinite(x) else f"{x:.4g}"
+def _feasible(trial: dict[str, Any]) -> bool:
+    """Whether the trial met every constraint (Ray may hand the flag back as a numpy bool)."""
+    return trial.get("feasible") in (True, np.True_)
 
 
 def plot_tradeoff(trials: Sequence[dict[str, Any]], spec: TuneSpec, path: Path) -> bool:
@@ -32,7 +32,7 @@ def plot_tradeoff(trials: Sequence[dict[str, Any]], spec: TuneSpec, path: Path) 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pts = [(_num(t.get("excess")), _num(t.get("objective")), t.get("feasible") in (True, np.True_)) for t in trials]
+    pts = [(_num(t.get("excess")), _num(t.get("objective")), _feasible(t)) for t in trials]
     pts = [p for p in pts if math.isfinite(p[0]) and math.isfinite(p[1])]
     if not pts:
         return False
@@ -68,7 +68,7 @@ def write_tune_report(trials: Sequence[dict[str, Any]], spec: TuneSpec, out: Pat
         lines += ["Constraints, in every run of every scenario (a failed run breaks them all):", ""]
         lines += [f"- `{c.metric[2:]}` ≤ {c.max:g}" for c in spec.constraints]
         lines.append("")
-    feasible = sum(1 for t in trials if t.get("feasible") in (True, np.True_))
+    feasible = sum(1 for t in trials if _feasible(t))
     lines.append(f"**{feasible} of {len(trials)} trials met every constraint.**")
     lines.append("")
     if best_config is not None:
@@ -85,8 +85,8 @@ def write_tune_report(trials: Sequence[dict[str, Any]], spec: TuneSpec, out: Pat
     lines += [f"## Best {min(SHOWN_TRIALS, len(trials))} trials", "", "| " + " | ".join(head) + " |",
               "|" + "---|" * len(head)]
     for i, t in enumerate(trials[:SHOWN_TRIALS]):
-        cells = [str(i + 1), *[_fmt(t.get(k)) for k in keys], "yes" if t.get("feasible") in (True, np.True_) else "no",
-                 _fmt(t.get("objective")), *[_fmt(t.get(w)) for w in worst]]
+        cells = [str(i + 1), *[text(t.get(k)) for k in keys], "yes" if _feasible(t) else "no",
+                 text(t.get("objective")), *[text(t.get(w)) for w in worst]]
         lines.append("| " + " | ".join(cells) + " |")
     failed_runs = [t for t in trials if t.get("run_error")]
     if failed_runs:
