@@ -10,7 +10,11 @@
 2. On the same records: ``encode_cycle`` (the writer's work per record: the ``lapwrench.Cycle``
    protobuf message filled and serialised by the ``google.protobuf`` library), ``decode_cycle``
    (the reader's), ``json.dumps`` of one record's dict (what the JSON logger did per record) and
-   Pinocchio's ``computeAllTerms`` on the Panda model (as bench/tick.py).
+   Pinocchio's ``computeAllTerms`` on the Panda model (as bench/tick.py). The records carry the
+   telemetry of two plugin cues (:data:`TELEMETRY`: a zoom and a keep-out cue, 5 values); what
+   it costs is timed against the same records without it, the calls interleaved: the writer's
+   ``encode_cycle`` and the real-time child's bus-row encoding (``CycleCodec.encode``, in the
+   1 kHz process).
 3. ``capacity`` records handed over at once and drained: the writer's sustained throughput.
 
 ``--encode-only`` runs step 2 alone (a few seconds, no paced loop).
@@ -24,6 +28,7 @@ Last line: one JSON object.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import tempfile
 import time
@@ -36,10 +41,14 @@ import numpy as np
 import pinocchio as pin
 
 from lapwrench.hardware.log import CYCLE_CAPACITY, CycleRecord, RunLogger, decode_cycle, encode_cycle, read_log
+from lapwrench.hardware.log.cycle_codec import cycle_message_classes
+from lapwrench.hardware.rt.codec import CycleCodec
 from lapwrench.robot.model import RobotModel
 from lapwrench.virtual import DEFAULT_Q0
 
 Q0 = np.asarray(DEFAULT_Q0, dtype=float)
+TELEMETRY = (("zoom", ("spread", "in_band", "force")), ("keep_out", ("distance", "barrier")))
+"""The cues whose telemetry the benchmark's records carry and its logs declare."""
 
 
 def percentiles_us(samples_ns: list[int] | np.ndarray) -> tuple[float, float]:
@@ -80,6 +89,7 @@ def record_fields(k: int, rng: np.random.Generator) -> dict[str, Any]:
         compute_us=120.0,
         cycle_us=1000.0,
         p_G=np.array([0.45, 0.0, 0.2]),
+        telemetry={"zoom": (0.12 + 0.01 * np.sin(t), 1.0, 0.0), "keep_out": (0.08, 0.0)},
     )
 
 
@@ -143,31 +153,67 @@ def time_calls(n: int, fn: Callable[[int], Any]) -> list[int]:
     return out
 
 
+def time_pair(n: int, fa: Callable[[int], Any], fb: Callable[[int], Any]) -> tuple[list[int], list[int]]:
+    """Durations (ns) of ``fa(k)`` and ``fb(k)`` for k < n, called alternately (load hits both alike)."""
+    clock = time.perf_counter_ns
+    for k in range(200):
+        fa(k)
+        fb(k)
+    a, b = [], []
+    for k in range(n):
+        t0 = clock()
+        fa(k)
+        t1 = clock()
+        fb(k)
+        a.append(t1 - t0)
+        b.append(clock() - t1)
+    return a, b
+
+
 @dataclass
 class References:
     """Durations (ns) of ``encode_cycle`` (the writer's work per record), ``decode_cycle``,
-    ``json.dumps(record.to_dict())`` and ``computeAllTerms`` (Panda), and the message size."""
+    ``json.dumps(record.to_dict())`` and ``computeAllTerms`` (Panda), and the message size; and the
+    writer's and the real-time child's encoding with and without the cues' telemetry, interleaved."""
 
     encode_ns: list[int]
     decode_ns: list[int]
     json_ns: list[int]
     cat_ns: list[int]
     message_bytes: float
+    plain_encode_ns: list[int]
+    tel_encode_ns: list[int]
+    plain_row_ns: list[int]
+    tel_row_ns: list[int]
 
 
 def references(cycles: int) -> References:
     """The per-record references, on ``cycles`` calls each."""
     rng = np.random.default_rng(1)
     records = [make_record(k, rng) for k in range(min(cycles, 2000))]
-    encode_ns = time_calls(cycles, lambda k: encode_cycle(records[k % len(records)]))
-    messages = [encode_cycle(r) for r in records]
-    decode_ns = time_calls(cycles, lambda k: decode_cycle(messages[k % len(messages)]))
-    json_ns = time_calls(cycles, lambda k: json.dumps(records[k % len(records)].to_dict()))
+    encode_ns = time_calls(cycles, lambda k: encode_cycle(records[k % len(records)], TELEMETRY))
+    messages = [encode_cycle(r, TELEMETRY) for r in records]
+    cls = cycle_message_classes(TELEMETRY)[0]
+    decode_ns = time_calls(cycles, lambda k: decode_cycle(messages[k % len(messages)], cls))
+    json_ns = time_calls(cycles, lambda k: json.dumps(records[k % len(records)].to_dict(TELEMETRY)))
+    plain = [dataclasses.replace(r, telemetry=None) for r in records]  # the same records without telemetry
+    n = len(records)
+    plain_encode_ns, tel_encode_ns = time_pair(
+        cycles, lambda k: encode_cycle(plain[k % n]), lambda k: encode_cycle(records[k % n], TELEMETRY)
+    )
+    codec, row = CycleCodec(lambda table, name: True), np.zeros(CycleCodec.WIDTH)
+    rt = [dataclasses.replace(r, external_force=r.external_force[:3]) for r in records]  # a row holds 3 values
+    rt_plain = [dataclasses.replace(r, telemetry=None) for r in rt]
+    plain_row_ns, tel_row_ns = time_pair(
+        cycles, lambda k: codec.encode(row, rt_plain[k % n]), lambda k: codec.encode(row, rt[k % n])
+    )
     model = RobotModel("panda")
     m, d = model.model, model.model.createData()
     v = 0.1 * np.ones(7)
     cat_ns = time_calls(cycles, lambda k: pin.computeAllTerms(m, d, Q0, v))
-    return References(encode_ns, decode_ns, json_ns, cat_ns, float(np.mean([len(b) for b in messages])))
+    size = float(np.mean([len(b) for b in messages]))
+    return References(encode_ns, decode_ns, json_ns, cat_ns, size, plain_encode_ns, tel_encode_ns, plain_row_ns,
+                      tel_row_ns)
 
 
 def print_references(ref: References) -> dict[str, float]:
@@ -180,7 +226,22 @@ def print_references(ref: References) -> dict[str, float]:
     print(f"decode_cycle (reader)  p50 {d50:8.2f} us   p99 {d99:8.2f} us   ({ref.message_bytes:.0f} bytes a message)")
     print(f"json.dumps(to_dict())  p50 {j50:8.2f} us   p99 {j99:8.2f} us   (reference: a JSON logger's work)")
     print(f"computeAllTerms        p50 {a50:8.2f} us   p99 {a99:8.2f} us   (reference)")
+    pe50, pe99 = percentiles_us(ref.plain_encode_ns)
+    te50, te99 = percentiles_us(ref.tel_encode_ns)
+    pr50, pr99 = percentiles_us(ref.plain_row_ns)
+    tr50, tr99 = percentiles_us(ref.tel_row_ns)
+    print(f"encode_cycle, no telemetry   p50 {pe50:7.2f} us   p99 {pe99:7.2f} us  | with: p50 {te50:7.2f} us   "
+          f"p99 {te99:7.2f} us   (x{te50 / pe50:.2f} at p50; interleaved)")
+    print(f"bus row (rt child), no tel.  p50 {pr50:7.2f} us   p99 {pr99:7.2f} us  | with: p50 {tr50:7.2f} us   "
+          f"p99 {tr99:7.2f} us   (x{tr50 / pr50:.2f} at p50; interleaved)")
     return {
+        "writer_encode_no_telemetry_p50_us": round(pe50, 3),
+        "writer_encode_with_telemetry_p50_us": round(te50, 3),
+        "writer_encode_telemetry_ratio_p50_x": round(te50 / pe50, 3),
+        "rt_row_encode_no_telemetry_p50_us": round(pr50, 3),
+        "rt_row_encode_with_telemetry_p50_us": round(tr50, 3),
+        "rt_row_encode_with_telemetry_p99_us": round(tr99, 3),
+        "rt_row_telemetry_ratio_p50_x": round(tr50 / pr50, 3),
         "writer_encode_cycle_p50_us": round(e50, 3),
         "writer_encode_cycle_p99_us": round(e99, 3),
         "reader_decode_cycle_p50_us": round(d50, 3),
@@ -197,7 +258,7 @@ def drain_throughput(folder: Path, model: RobotModel | None) -> float:
     """Records per second the writer sustains: ``capacity`` records handed at once, then drained."""
     rng = np.random.default_rng(2)
     records = [make_record(k, rng) for k in range(CYCLE_CAPACITY)]
-    logger = RunLogger(folder / "drain.mcap", {"bench": "drain"}, model=model)
+    logger = RunLogger(folder / "drain.mcap", {"bench": "drain"}, model=model, telemetry=dict(TELEMETRY))
     t0 = time.perf_counter()
     for r in records:
         logger.cycle(r)
@@ -221,7 +282,7 @@ def main() -> None:
     model = None if args.no_model else RobotModel("panda")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        logger = RunLogger(folder / "bench.mcap", {"bench": "log"}, model=model)
+        logger = RunLogger(folder / "bench.mcap", {"bench": "log"}, model=model, telemetry=dict(TELEMETRY))
         loop = paced_loop(args.cycles, args.rate, logger)
         logger.close()
         stats = logger.stats()

@@ -17,45 +17,22 @@ TESTS = ROOT / "tests"
 # list when its test file appears (the stale-entry check below insists).
 UNTESTED: dict[str, str] = {
     # hardware entry points, exercised end to end by tests/hardware/test_cli.py and the integration suites
-    "hardware/run_common.py": "signals and summaries of both run paths: tests/hardware/test_signals.py",
     "hardware/run_inprocess.py": "the in-process run path: tests/hardware/test_cli.py (dry run)",
     "hardware/run_rt.py": "the real-time run path: tests/hardware/test_rt_process.py",
     "hardware/frankysim.py": "the franky-sim server: tests/hardware/test_faults.py, test_frankysim_e2e.py",
     "hardware/rt/child.py": "the child process's main: tests/hardware/test_rt_process.py",
     "hardware/rt/factories.py": "robot factories of the child: tests/hardware/test_rt_process.py",
     "hardware/rt/parent.py": "RtProcess: tests/hardware/test_rt_process.py",
-    "hardware/rt/peers.py": "heartbeat watch of the peers: tests/hardware/test_rt_process.py",
-    "hardware/rt/options.py": "RtOptions/apply_realtime: tests/hardware/test_rt_process.py",
-    "hardware/rt/spec.py": "RtSpec data: tests/hardware/test_rt_process.py",
-    "hardware/rt/sizes.py": "constants only",
-    "hardware/log/topics.py": "constants only",
     # simulation pieces exercised through the world, the scenarios and the demo
     "sim/report.py": "the demo report: tests/sim/test_demo.py",
-    "sim/results.py": "scenario results: tests/sim/test_scenarios.py, test_demo.py",
     "sim/video.py": "the demo video: tests/sim/test_demo.py",
-    "sim/scene/materials.py": "MJCF materials: tests/sim/scene/test_build.py",
-    "sim/scene/names.py": "names only",
-    "sim/scene/phantom.py": "the phantom's MJCF: tests/sim/scene/test_build.py, tests/sim/world",
-    "sim/scene/scope.py": "the scope's MJCF: tests/sim/scene/test_build.py",
-    "sim/scene/trocar.py": "the trocar's MJCF: tests/sim/world/test_readings.py",
     "sim/world/errors.py": "one exception class",
     # perception pieces exercised through the detectors and the CLI
-    "perception/synthetic.py": "synthetic scenes and models: every perception test draws with them",
     "perception/train.py": "training needs the training venv (torch, ultralytics)",
-    "perception/yolo_model.py": "the ONNX model reader: tests/perception/test_onnx_yolo.py",
     # the rest
-    "robot/errors.py": "exception classes",
-    "robot_interface.py": "a Protocol",
-    "drivers/base.py": "the driver base class: every tests/drivers test runs it",
-    "drivers/simulated_hex.py": "the simulated F/T box: tests/drivers/ft (every test talks to it)",
     "safety/config.py": "the supervisor's config: tests/safety/test_supervisor.py",
     "safety/watches.py": "the supervisor's watches: tests/safety/test_supervisor.py",
     "tick_core.py": "the compiled tick: tests/test_compiled_tick.py, tests/test_controller.py",
-    # new in issue 13 and still without their own file when this list was written: give them one
-    "robot/arms/panda.py": "arm data: tests/robot/test_arms.py checks every registered arm",
-    "robot/arms/fr3.py": "arm data: tests/robot/test_arms.py",
-    "robot/arms/ur5.py": "arm data: tests/robot/test_arms.py",
-    "robot/arms/xarm7.py": "arm data: tests/robot/test_arms.py",
 }
 
 # Test files that are not about one module (tests/README.md says why).

@@ -29,6 +29,8 @@ from lapwrench.config_yaml import cut, short
 PAPER_CUES = ("rcm", "interaction", "tracking", "viscous")
 PRIMARY = "rcm"
 MAX_CUES = 8  # the real-time bus carries at most 8 wrenches a cycle (hardware.rt.codec: N_WRENCH)
+MAX_CUE_TELEMETRY = 8  # telemetry fields one cue may declare (each is logged every cycle)
+MAX_TELEMETRY = 24  # telemetry fields of the running Python cues together (a real-time bus row holds that many)
 _RESERVED = ("type", "enabled")
 
 
@@ -52,7 +54,9 @@ class CueEntry:
 DEFAULT_CUES: tuple[CueEntry, ...] = tuple(CueEntry(n, n) for n in PAPER_CUES)
 
 
-def _entry(name: str, data: Any) -> CueEntry:
+def _entry(name: str, data: Any) -> tuple[CueEntry, int]:
+    """One cue of the section, and the number of telemetry fields it logs (none for the compiled
+    tick's cues: they run outside the Python cues' telemetry)."""
     key = f"cues.{name}"
     if data is None:
         data = {}
@@ -74,6 +78,7 @@ def _entry(name: str, data: Any) -> CueEntry:
     if getattr(cls, "fused", False) and name != kind:
         raise ConfigError(f"config key '{key}.type': cue '{kind}' is part of the compiled tick and runs only under "
                           f"its own name ('{kind}')", f"{key}.type")
+    n_telemetry = 0 if getattr(cls, "fused", False) else len(telemetry_fields(cls, key, kind))
     values = {k: v for k, v in data.items() if k not in _RESERVED}
     section = getattr(cls, "config_section", None)
     params_cls = getattr(cls, "Params", None)
@@ -83,7 +88,7 @@ def _entry(name: str, data: Any) -> CueEntry:
             first = _show(next(iter(values)))
             raise ConfigError(f"config key '{key}.{first}': cue '{kind}' takes no parameters here "
                               f"(its parameters: {where})", f"{key}.{first}")
-        return CueEntry(name, kind, enabled)
+        return CueEntry(name, kind, enabled), n_telemetry
     try:
         params = build(params_cls, values, key)
     except ConfigError as exc:  # raised by the plugin's own checks (Params.__post_init__): name the cue
@@ -91,7 +96,7 @@ def _entry(name: str, data: Any) -> CueEntry:
             raise
         sub = f"{key}.{exc.key}" if exc.key else key
         raise ConfigError(f"config key '{sub}': {exc}", sub) from exc
-    return CueEntry(name, kind, enabled, params)
+    return CueEntry(name, kind, enabled, params), n_telemetry
 
 
 def parse_cues(data: Any) -> tuple[CueEntry, ...]:
@@ -108,7 +113,29 @@ def parse_cues(data: Any) -> tuple[CueEntry, ...]:
     if len(set(data) | set(PAPER_CUES)) > MAX_CUES:
         raise ConfigError(f"config section 'cues' has more than {MAX_CUES} cues", "cues")
     names = list(PAPER_CUES) + [n for n in data if n not in PAPER_CUES]
-    return tuple(_entry(n, data.get(n)) for n in names)
+    parsed = [_entry(n, data.get(n)) for n in names]
+    total = sum(n for e, n in parsed if e.enabled)
+    if total > MAX_TELEMETRY:
+        raise ConfigError(f"config section 'cues': the cues that run declare {total} telemetry fields together; "
+                          f"at most {MAX_TELEMETRY} are logged each cycle", "cues")
+    return tuple(e for e, _ in parsed)
+
+
+def telemetry_fields(cls: Any, key: str, kind: str) -> tuple[str, ...]:
+    """The ``telemetry_fields`` of cue class ``cls`` (configured at ``key``), checked: at most
+    :data:`MAX_CUE_TELEMETRY` distinct lower-case names (each becomes a field of the log's cycle
+    message and a column of the traces), else a :class:`ConfigError`."""
+    fields = getattr(cls, "telemetry_fields", ())
+    if not isinstance(fields, tuple | list) or not all(isinstance(f, str) and plugins.NAME.match(f) for f in fields):
+        raise ConfigError(f"config key '{key}': cue '{kind}' has telemetry_fields {short(fields)}; they must be a "
+                          "tuple of lower-case names (a-z, 0-9, _; at most 40 characters)", key)
+    if len(set(fields)) != len(fields):
+        raise ConfigError(f"config key '{key}': cue '{kind}' names a telemetry field twice: {short(tuple(fields))}",
+                          key)
+    if len(fields) > MAX_CUE_TELEMETRY:
+        raise ConfigError(f"config key '{key}': cue '{kind}' declares {len(fields)} telemetry fields; a cue logs at "
+                          f"most {MAX_CUE_TELEMETRY}", key)
+    return tuple(fields)
 
 
 def cues_to_dict(entries: tuple[CueEntry, ...]) -> dict[str, Any]:

@@ -158,7 +158,7 @@ class SimulatedHexBox:
         elif command == CMD_STOP:
             self._streaming = False
         elif command == CMD_BIAS and self.device_bias:
-            self._bias = self._current_counts() if value != 0 else np.zeros(6, dtype=np.int64)
+            self._bias = self._current_counts().copy() if value != 0 else np.zeros(6, dtype=np.int64)
 
     def _current_counts(self) -> np.ndarray:
         if self.counts_fn is not None:

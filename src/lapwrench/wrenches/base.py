@@ -67,7 +67,11 @@ class Cue:
       configuration (``tracking:``, ...) instead.
     - ``fused``: computed inside the compiled tick (the paper's four cues): ``compute`` is then the
       reference the compiled tick is tested against, not what runs at 1 kHz.
-    - ``telemetry_fields``: names of the numbers :meth:`telemetry` returns each tick.
+    - ``telemetry_fields``: names of the numbers :meth:`telemetry` returns each tick (lower-case
+      identifiers, at most :data:`~lapwrench.config_cues.MAX_CUE_TELEMETRY` a cue and
+      :data:`~lapwrench.config_cues.MAX_TELEMETRY` for all the cues of a configuration, checked
+      when it loads). They are logged every cycle: the traces' ``cue:<name>.<field>`` columns and
+      the run log's ``telemetry.<name>.<field>`` (:mod:`lapwrench.hardware.log.telemetry`).
     """
 
     priority: ClassVar[Priority] = "null"

@@ -35,3 +35,21 @@ def test_cycle_messages_decode_with_the_protobuf_library(tmp_path: Path) -> None
     # no instruments (stale) and no instruments in view (fresh, empty) stay apart
     assert runlog.decode_cycle(runlog.encode_cycle(record(1, instruments=None)))["instruments"] is None
     assert runlog.decode_cycle(runlog.encode_cycle(record(1, instruments=np.zeros((0, 2)))))["instruments"] == []
+
+
+def test_the_cues_telemetry_decodes_by_name_with_the_protobuf_library() -> None:
+    """Foxglove reads ``telemetry.<cue>.<field>`` from the schema alone; decode_cycle with the log's
+    own message class gives the record's dict back, a cue without values this cycle left out."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    layout = (("zoom", ("spread", "in_band", "force")), ("keep_out", ("distance", "barrier")))
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(runlog.cycle_descriptor(layout)).file:
+        pool.Add(fd)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName("lapwrench.Cycle"))
+    rec = record(3, telemetry={"zoom": (0.12, 1.0, -4.5)})
+    msg = cls.FromString(runlog.encode_cycle(rec, layout))
+    assert (msg.telemetry.zoom.spread, msg.telemetry.zoom.in_band, msg.telemetry.zoom.force) == (0.12, 1.0, -4.5)
+    assert msg.telemetry.HasField("zoom") and not msg.telemetry.HasField("keep_out")
+    assert runlog.decode_cycle(msg.SerializeToString(), cls) == rec.to_dict(layout)
+    assert runlog.decode_cycle(runlog.encode_cycle(rec))["telemetry"] == {}  # no layout: no telemetry

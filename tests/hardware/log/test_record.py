@@ -42,3 +42,20 @@ def test_a_failed_tick_has_no_record() -> None:
 def test_plain_values_have_no_nan() -> None:
     assert plain_list(np.array([1.0, np.nan, np.inf])) == [1.0, None, None] and plain_list(None) is None
     assert plain_float(np.nan) is None and plain_float(2) == 2.0 and plain_float(None) is None
+
+
+def test_a_cycle_record_carries_the_python_cues_telemetry() -> None:
+    """The configured keep-out cue's telemetry rides along by cue name, and reads back by field name
+    in a log whose schema names its fields."""
+    from lapwrench.config import from_dict
+
+    ctrl = Controller(from_dict({"cues": {"keep_out": {"center": [0.9, 0.0, 0.1], "radius": 0.05}}}))
+    ctrl.reset(home_pose("panda"))
+    assert ctrl.ref is not None
+    r = ctrl.tick(SensorFrame(0.5, robot=RobotReading(ctrl.ref.q, ctrl.ref.dq, None, 0.5)))
+    rec = cycle_record(_cycle(r), "running", False)
+    assert rec is not None and rec.telemetry is not None and set(rec.telemetry) == {"keep_out"}
+    distance, barrier = rec.telemetry["keep_out"]
+    got = rec.to_dict((("keep_out", ("distance", "barrier")),))["telemetry"]
+    assert got == {"keep_out": {"distance": distance, "barrier": barrier}} and distance > 0.2
+    assert rec.to_dict()["telemetry"] == {}  # a log that names no telemetry fields carries none

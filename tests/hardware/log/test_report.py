@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from hardware.log.support import report
+from hardware.log.support import record, report
 
 from lapwrench.hardware.log import (
     LogFileError,
+    RunLogger,
     load_log,
 )
 
@@ -69,3 +71,24 @@ def test_the_command_line_reports_a_truncated_log_and_refuses_a_foreign_one(
         )  # fmt: skip
         assert proc.returncode == code and words in proc.stderr, proc.stderr
         assert "Traceback" not in proc.stdout + proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_the_report_plots_the_cues_telemetry_and_lists_its_fields(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "run.mcap"
+    with RunLogger(path, {"robot": "test"}, telemetry={"keep_out": ("distance", "barrier")}) as log:
+        for k in range(200):
+            log.cycle(record(k, telemetry={"keep_out": (0.01 * k, max(0.0, 50.0 - k))}))
+    code, out, _ = report(path, tmp_path / "report", capsys)
+    assert code == 0 and str(tmp_path / "report" / "cue_telemetry.png") in out.splitlines()
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())
+    assert summary["telemetry"] == {"keep_out": ["distance", "barrier"]}
+
+
+def test_a_log_without_telemetry_has_no_telemetry_plot(
+    long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = report(long_log[0], tmp_path / "report", capsys)
+    assert code == 0 and "cue_telemetry.png" not in out
+    assert json.loads((tmp_path / "report" / "summary.json").read_text())["telemetry"] == {}

@@ -81,3 +81,38 @@ def test_the_bus_carries_every_cue_the_configuration_may_run() -> None:
     from lapwrench.hardware.rt.codec import CycleCodec
 
     assert MAX_CUES <= CycleCodec.N_WRENCH
+
+
+def _decoded(bus: Bus) -> list[CycleRecord]:
+    decoder = CycleCodec()
+    for row in bus.ring("events").take():
+        decoder.learn(unpack_event(row)[2])
+    return [decoder.decode(r) for r in bus.ring("log").take()]
+
+
+def test_the_cues_telemetry_crosses_the_bus_by_cue_name(bus: Bus) -> None:
+    """What the 1 kHz child logs reaches the parent's log writer: every cue's values, in order, under
+    its name (NaN stays NaN); a record without telemetry comes back with none."""
+    sink = ShmLogSink(bus.ring("log"), bus.ring("events"))
+    sink.cycle(record(telemetry={"zoom": (0.25, 1.0, np.nan), "keep_out": (0.3, 0.0)}))
+    sink.cycle(record(k=8))
+    a, b = _decoded(bus)
+    assert list(a.telemetry) == ["zoom", "keep_out"] and a.telemetry["keep_out"] == (0.3, 0.0)
+    assert a.telemetry["zoom"][:2] == (0.25, 1.0) and np.isnan(a.telemetry["zoom"][2])
+    assert b.telemetry == {}
+
+
+def test_a_row_holds_all_the_telemetry_a_configuration_may_log_and_cuts_the_rest(bus: Bus) -> None:
+    from lapwrench.config_cues import MAX_CUE_TELEMETRY, MAX_TELEMETRY
+
+    per_cue = [tuple(float(10 * c + i) for i in range(MAX_CUE_TELEMETRY)) for c in range(CycleCodec.N_WRENCH)]
+    most = {f"cue{c}": per_cue[c] for c in range(MAX_TELEMETRY // MAX_CUE_TELEMETRY)}
+    sink = ShmLogSink(bus.ring("log"), bus.ring("events"))
+    sink.cycle(record(telemetry=most))
+    sink.cycle(record(telemetry={f"cue{c}": v for c, v in enumerate(per_cue)}))  # more than any configuration
+    full, cut = _decoded(bus)
+    assert full.telemetry == most
+    kept = list(cut.telemetry.items())  # whole cues only, the first ones, at least what a configuration logs
+    assert len(most) <= len(kept) < len(per_cue)
+    assert kept == [(f"cue{c}", v) for c, v in enumerate(per_cue[: len(kept)])]
+    assert sink.encode_errors == 0

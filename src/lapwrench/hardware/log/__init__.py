@@ -18,8 +18,10 @@ channel lives in a :class:`foxglove.Context` of the logger's own.
     (repeated ``lapwrench.Wrench {name, w}``), the mode, grip gain, the RCM point p_R, the
     closest point p_G (empty when not given), the RCM error vector and norm (at the reference)
     and the RCM error of the *measured* joints (NaN when unknown), the controller's command, the
-    command actually sent, supervisor state/alarm, compute and cycle times. Field numbers:
-    :data:`CYCLE_FIELDS`.
+    command actually sent, supervisor state/alarm, compute and cycle times, and the cues'
+    telemetry: ``telemetry.<cue>.<field>`` (a message per cue that runs in Python and declares
+    ``telemetry_fields``, a ``double`` per field; the schema is built from the configured cues,
+    :mod:`~lapwrench.hardware.log.telemetry`). Field numbers: :data:`CYCLE_FIELDS`.
 ``/lapwrench/event`` (``lapwrench.Event``, JSON)
     supervisor and input events: ``{time, kind, message}``.
 ``/lapwrench/meta`` (``lapwrench.Meta``, JSON)
@@ -86,6 +88,7 @@ Modules
 :mod:`~lapwrench.hardware.log.record` (:class:`CycleRecord`),
 :mod:`~lapwrench.hardware.log.topics` (topics, JSON schemas),
 :mod:`~lapwrench.hardware.log.cycle_codec` (the ``lapwrench.Cycle`` schema, encode/decode),
+:mod:`~lapwrench.hardware.log.telemetry` (the cues' telemetry in it),
 :mod:`~lapwrench.hardware.log.frames` (forward kinematics of the logged q),
 :mod:`~lapwrench.hardware.log.messages` (Foxglove's messages), :mod:`~lapwrench.hardware.log.sink`
 (the MCAP file and its channels), :mod:`~lapwrench.hardware.log.writer` (:class:`RunLogger`),
@@ -98,6 +101,7 @@ from lapwrench.hardware.log.cycle_codec import (
     CYCLE_FIELDS,
     CYCLE_SCHEMA_NAME,
     INSTRUMENT_COUNT_FIELD,
+    TELEMETRY_FIELD_NUMBER,
     cycle_descriptor,
     decode_cycle,
     encode_cycle,
@@ -139,6 +143,11 @@ from lapwrench.hardware.log.report import (
     make_report,
     truncation_note,
     write_report,
+)
+from lapwrench.hardware.log.telemetry import (
+    TelemetryLayout,
+    checked_layout,
+    telemetry_layout,
 )
 from lapwrench.hardware.log.topics import (
     CYCLE_TOPIC,
@@ -193,6 +202,7 @@ __all__ = [
     "STATIC_EVERY",
     "STATS_SCHEMA",
     "STATS_TOPIC",
+    "TELEMETRY_FIELD_NUMBER",
     "TF_TOPIC",
     "TRANSFORM_RATE_HZ",
     "WRENCH_TOPIC",
@@ -205,10 +215,12 @@ __all__ = [
     "Placement",
     "RunLogger",
     "ScopeFrames",
+    "TelemetryLayout",
     "TopicInfo",
     "Truncation",
     "add_log_report_arguments",
     "check_log_file",
+    "checked_layout",
     "cycle_descriptor",
     "decode_cycle",
     "encode_cycle",
@@ -223,6 +235,7 @@ __all__ = [
     "make_report",
     "pose_message",
     "read_log",
+    "telemetry_layout",
     "truncation_note",
     "wrench_scene_message",
     "write_report",

@@ -6,6 +6,10 @@ code): :func:`cycle_descriptor` is the ``FileDescriptorSet`` written as the chan
 Foxglove (and any protobuf library) decodes the messages with, and :func:`cycle_message_classes`
 the message classes the library builds from it. Proto3: a zero, an empty string, ``False`` or an
 empty repeated field is not written and reads back as such.
+
+The schema depends on the cues a run logs telemetry for (a :data:`~.telemetry.TelemetryLayout`):
+field ``telemetry`` holds one message per cue with one ``double`` per field (:mod:`.telemetry`).
+Every function takes the layout (default: none) and caches what it builds for it.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lapwrench.hardware.log.record import CycleRecord, plain_float
+from lapwrench.hardware.log.telemetry import TELEMETRY_FIELD, TelemetryLayout, add_telemetry_message
 
 if TYPE_CHECKING:
     from google.protobuf.descriptor import Descriptor
@@ -39,14 +44,16 @@ CYCLE_FIELDS: tuple[tuple[str, int, str], ...] = (
     ("cycle_us", 26, "f"),
 )  # fmt: skip
 INSTRUMENT_COUNT_FIELD = 27
+TELEMETRY_FIELD_NUMBER = 28  # lapwrench.Telemetry: the cues' telemetry (.telemetry)
 WRENCH_FIELDS: tuple[tuple[str, int, str], ...] = (("name", 1, "s"), ("w", 2, "v"))
 
 _NAMES = {kind: tuple(n for n, _, k in CYCLE_FIELDS if k == kind) for kind in ("f", "i", "b", "s", "v")}
 
 
 # -- the schema ------------------------------------------------------------------------------------
-def cycle_file_descriptor() -> FileDescriptorProto:
-    """``lapwrench/cycle.proto`` (proto3): ``lapwrench.Cycle`` and ``lapwrench.Wrench``."""
+def cycle_file_descriptor(telemetry: TelemetryLayout = ()) -> FileDescriptorProto:
+    """``lapwrench/cycle.proto`` (proto3): ``lapwrench.Cycle``, ``lapwrench.Wrench`` and the
+    ``lapwrench.Telemetry`` of the cues in ``telemetry``."""
     from google.protobuf.descriptor_pb2 import FieldDescriptorProto as F
     from google.protobuf.descriptor_pb2 import FileDescriptorProto
 
@@ -65,15 +72,18 @@ def cycle_file_descriptor() -> FileDescriptorProto:
             field = proto.field.add(name=name, number=number, label=label, type=type_)
             if kind == "w":
                 field.type_name = "." + WRENCH_SCHEMA_NAME
+    cycle = file.message_type[0]
+    cycle.field.add(name=TELEMETRY_FIELD, number=TELEMETRY_FIELD_NUMBER, label=F.LABEL_OPTIONAL, type=F.TYPE_MESSAGE,
+                    type_name=add_telemetry_message(file, telemetry))
     return file
 
 
 @functools.cache
-def cycle_descriptor() -> bytes:
+def cycle_descriptor(telemetry: TelemetryLayout = ()) -> bytes:
     """The ``FileDescriptorSet`` of ``lapwrench.Cycle`` (the MCAP schema data)."""
     from google.protobuf.descriptor_pb2 import FileDescriptorSet
 
-    return FileDescriptorSet(file=[cycle_file_descriptor()]).SerializeToString()
+    return FileDescriptorSet(file=[cycle_file_descriptor(telemetry)]).SerializeToString()
 
 
 def message_class(descriptor: Descriptor) -> type[Message]:
@@ -87,12 +97,12 @@ def message_class(descriptor: Descriptor) -> type[Message]:
 
 
 @functools.cache
-def cycle_message_classes() -> tuple[type[Message], type[Message]]:
+def cycle_message_classes(telemetry: TelemetryLayout = ()) -> tuple[type[Message], type[Message]]:
     """The ``lapwrench.Cycle`` and ``lapwrench.Wrench`` classes, on a descriptor pool of their own."""
     from google.protobuf import descriptor_pool
 
     pool = descriptor_pool.DescriptorPool()
-    pool.Add(cycle_file_descriptor())
+    pool.Add(cycle_file_descriptor(telemetry))
     return (
         message_class(pool.FindMessageTypeByName(CYCLE_SCHEMA_NAME)),
         message_class(pool.FindMessageTypeByName(WRENCH_SCHEMA_NAME)),
@@ -105,9 +115,10 @@ def _floats(x: Any) -> list[float]:
     return np.asarray(x, dtype=float).ravel().tolist()
 
 
-def encode_cycle(rec: CycleRecord) -> bytes:
-    """The ``lapwrench.Cycle`` protobuf bytes of a record (about 1.3 kB for the runner's record)."""
-    msg = cycle_message_classes()[0]()
+def encode_cycle(rec: CycleRecord, telemetry: TelemetryLayout = ()) -> bytes:
+    """The ``lapwrench.Cycle`` protobuf bytes of a record (about 1.3 kB for the runner's record),
+    with the telemetry of the cues in ``telemetry`` (a cue the record has no values for is left out)."""
+    msg = cycle_message_classes(telemetry)[0]()
     for name in _NAMES["f"]:
         x = getattr(rec, name)
         setattr(msg, name, math.nan if x is None else float(x))
@@ -131,7 +142,21 @@ def encode_cycle(rec: CycleRecord) -> bytes:
         wrench = msg.wrenches.add(name=str(name))
         if w is not None:
             wrench.w.extend(_floats(w))
+    if telemetry and rec.telemetry:
+        _encode_telemetry(msg.telemetry, telemetry, rec.telemetry)
     return msg.SerializeToString()
+
+
+def _encode_telemetry(msg: Any, layout: TelemetryLayout, values: dict[str, Any]) -> None:
+    """Each cue's values into its message of ``lapwrench.Telemetry`` (set, even when all zero)."""
+    for cue, fields in layout:
+        v = values.get(cue)
+        if v is None:
+            continue
+        sub = getattr(msg, cue)
+        sub.SetInParent()
+        for name, x in zip(fields, v, strict=False):
+            setattr(sub, name, float(x))
 
 
 # -- decoding (the reader) --------------------------------------------------------------------------
@@ -159,9 +184,23 @@ def _points(msg: Any) -> list[Any] | None:
     return [values[i * n : (i + 1) * n] for i in range(count)]
 
 
-def decode_cycle(data: bytes) -> dict[str, Any]:
-    """``lapwrench.Cycle`` bytes → the dict of :meth:`CycleRecord.to_dict`."""
-    msg = cycle_message_classes()[0].FromString(data)
+def _telemetry(msg: Any) -> dict[str, dict[str, float | None]]:
+    """The cues' telemetry of a cycle message: cue → field → value (NaN/inf → ``None``); only the
+    cues the message has values for; none when its schema has no telemetry (an older log)."""
+    tel = getattr(msg, TELEMETRY_FIELD, None)
+    if tel is None:
+        return {}
+    return {
+        fd.name: {f.name: plain_float(getattr(sub, f.name)) for f in fd.message_type.fields}
+        for fd, sub in tel.ListFields()
+    }
+
+
+def decode_cycle(data: bytes, cycle_class: type[Message] | None = None) -> dict[str, Any]:
+    """``lapwrench.Cycle`` bytes → the dict of :meth:`CycleRecord.to_dict`. ``cycle_class`` is the
+    message class of the log's own schema (which names its cues' telemetry fields); by default
+    the schema without telemetry."""
+    msg = (cycle_message_classes()[0] if cycle_class is None else cycle_class).FromString(data)
     out: dict[str, Any] = {}
     for name, _, kind in CYCLE_FIELDS:
         value = getattr(msg, name)
@@ -179,4 +218,5 @@ def decode_cycle(data: bytes) -> dict[str, Any]:
             out[name] = _points(msg)
         else:
             out[name] = {w.name: _values(w.w) for w in value}
+    out[TELEMETRY_FIELD] = _telemetry(msg)
     return out

@@ -184,7 +184,7 @@ class _Decoder:
         if encoding == "json":
             return json.loads(data)
         if encoding == "protobuf" and schema is not None and schema.name == CYCLE_SCHEMA_NAME:
-            return decode_cycle(data)
+            return decode_cycle(data, self._message_class(schema))  # the file's own: its cues' telemetry
         if encoding == "protobuf" and schema is not None:
             return _message_dict(self._message_class(schema).FromString(data))
         return data

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from lapwrench.hardware.log.telemetry import TelemetryLayout
     from lapwrench.loop_stats import Cycle
 
 
@@ -37,7 +38,8 @@ class CycleRecord:
     """What the loop hands to the logger each cycle (references; serialised in the writer thread).
 
     ``p_G`` (the closest point, m in {B}) is optional: with it the log has the G frame and the
-    null-space wrench arrows at G.
+    null-space wrench arrows at G. ``telemetry`` is the cues' telemetry by cue name, one number per
+    field (:attr:`TickResult.telemetry <lapwrench.controller.TickResult.telemetry>`).
     """
 
     t: float
@@ -66,9 +68,11 @@ class CycleRecord:
     compute_us: float
     cycle_us: float
     p_G: Any = None
+    telemetry: dict[str, Any] | None = None
 
-    def to_dict(self) -> dict[str, Any]:
-        """The record as :func:`~lapwrench.hardware.log.read_log` gives it back (lists; NaN/inf → ``None``)."""
+    def to_dict(self, telemetry: TelemetryLayout = ()) -> dict[str, Any]:
+        """The record as :func:`~lapwrench.hardware.log.read_log` gives it back (lists; NaN/inf → ``None``)
+        from a log whose cycle schema names the cues' telemetry fields ``telemetry``."""
         return {
             "t": plain_float(self.t),
             "robot_time": plain_float(self.robot_time),
@@ -96,7 +100,20 @@ class CycleRecord:
             "alarm": bool(self.alarm),
             "compute_us": plain_float(self.compute_us),
             "cycle_us": plain_float(self.cycle_us),
+            "telemetry": self.telemetry_dict(telemetry),
         }
+
+    def telemetry_dict(self, telemetry: TelemetryLayout) -> dict[str, dict[str, float | None]]:
+        """cue → field → value of the cues in ``telemetry`` the record has values for (a missing value
+        reads 0, as protobuf gives back an unset field)."""
+        values = self.telemetry or {}
+        out = {}
+        for cue, fields in telemetry:
+            v = values.get(cue)
+            if v is not None:
+                v = list(v) + [0.0] * (len(fields) - len(v))
+                out[cue] = {name: plain_float(x) for name, x in zip(fields, v, strict=False)}
+        return out
 
 
 def cycle_record(c: Cycle, supervisor: str, alarm: bool, tau_J: Any = None) -> CycleRecord | None:
@@ -113,5 +130,5 @@ def cycle_record(c: Cycle, supervisor: str, alarm: bool, tau_J: Any = None) -> C
         instruments=None if ins is None else ins.points, wrenches=r.wrenches, mode=r.mode, delta=r.delta,
         contacts=r.contacts, p_R=r.p_R, p_G=r.p_G, e_R=r.e_R, rcm_error=r.rcm_error,
         rcm_error_measured=c.scope.rcm_error, q_ref=r.q_ref, q_cmd=c.q_cmd, supervisor=supervisor, alarm=alarm,
-        compute_us=c.compute * 1e6, cycle_us=c.period * 1e6,
+        compute_us=c.compute * 1e6, cycle_us=c.period * 1e6, telemetry=r.telemetry,
     )

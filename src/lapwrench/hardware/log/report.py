@@ -1,5 +1,6 @@
-"""``lapwrench log-report``: PNG plots of a run log (RCM error, wrenches, mode, joint commands),
-``summary.json`` (with the logger's drop counts and the topics) and ``events.json``.
+"""``lapwrench log-report``: PNG plots of a run log (RCM error, wrenches, mode, joint commands, and
+the cues' telemetry when the log has any), ``summary.json`` (with the logger's drop counts, the
+topics and the telemetry fields) and ``events.json``.
 
 A truncated log (the run was killed before it closed its log) is read as far as it goes: one line
 on stderr, ``lapwrench log-report: run.mcap is truncated (no summary/footer); read 1547 cycles up to
@@ -112,6 +113,33 @@ def _plot_joints(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Pat
     return _save(fig, out / "joint_commands.png")
 
 
+def telemetry_fields(cycles: list[dict[str, Any]]) -> dict[str, list[str]]:
+    """cue → its telemetry field names, as the log's cycles carry them (first seen first)."""
+    out: dict[str, list[str]] = {}
+    for c in cycles:
+        for cue, values in (c.get("telemetry") or {}).items():
+            known = out.setdefault(cue, [])
+            known.extend(f for f in values if f not in known)
+    return out
+
+
+def _plot_telemetry(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path | None:
+    """One panel per cue, one line per telemetry field (None: the log has no telemetry)."""
+    fields = telemetry_fields(cycles)
+    if not fields:
+        return None
+    fig, grid = plt.subplots(len(fields), 1, figsize=(9, 2.5 * len(fields) + 0.5), sharex=True, squeeze=False)
+    for ax, (cue, names) in zip(grid[:, 0], fields.items(), strict=True):
+        for name in names:
+            y = [((c.get("telemetry") or {}).get(cue) or {}).get(name) for c in cycles]
+            ax.plot(t, np.array([np.nan if v is None else v for v in y], dtype=float), label=name)
+        ax.set(title=f"cue {cue}: telemetry")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    grid[-1, 0].set_xlabel("time (s)")
+    return _save(fig, out / "cue_telemetry.png")
+
+
 def _nan_stat(fn: Any, x: np.ndarray, scale: float = 1.0) -> float | None:
     return float(scale * fn(x[np.isfinite(x)])) if np.isfinite(x).any() else None
 
@@ -127,6 +155,7 @@ def _summary(log: LogContents, t: np.ndarray) -> dict[str, Any]:
         "compute_p50_us": _nan_stat(lambda x: np.percentile(x, 50), compute),
         "compute_p99_us": _nan_stat(lambda x: np.percentile(x, 99), compute),
         "events": len(log.events),
+        "telemetry": telemetry_fields(cycles),
         "truncated": None if log.truncated is None else dataclasses.asdict(log.truncated),
         "log_dropped": None if log.stats is None else log.stats.get("dropped"),
         "log_stats": log.stats,
@@ -164,6 +193,9 @@ def write_report(log: LogContents, path: str | Path, out: str | Path) -> list[Pa
         _plot_modes(plt, t, cycles, out),
         _plot_joints(plt, t, cycles, out),
     ]
+    telemetry = _plot_telemetry(plt, t, cycles, out)
+    if telemetry is not None:
+        files.append(telemetry)
     (out / "summary.json").write_text(json.dumps(_summary(log, t), indent=2))
     (out / "events.json").write_text(json.dumps(log.events, indent=2))
     return [*files, out / "summary.json", out / "events.json"]

@@ -12,6 +12,7 @@ import numpy as np
 from lapwrench.hardware.log.cycle_codec import CYCLE_SCHEMA_NAME, cycle_descriptor, cycle_message_classes
 from lapwrench.hardware.log.messages import log_level, stamp
 from lapwrench.hardware.log.record import plain_list
+from lapwrench.hardware.log.telemetry import TelemetryLayout
 from lapwrench.hardware.log.topics import (
     CYCLE_TOPIC,
     EVENT_SCHEMA,
@@ -70,13 +71,14 @@ class McapSink:
     Args:
         path: The ``.mcap`` file (replaced if it exists); None: no file (live telemetry only).
         with_frames: Open the transform, pose and wrench-arrow channels (the logger has a model).
+        telemetry: The cues whose telemetry the cycle schema declares.
     """
 
-    def __init__(self, path: Path | None, with_frames: bool) -> None:
+    def __init__(self, path: Path | None, with_frames: bool, telemetry: TelemetryLayout = ()) -> None:
         import foxglove
         from foxglove import channels as fc
 
-        cycle_message_classes()  # built here, not with the first cycle on the writer thread
+        cycle_message_classes(telemetry)  # built here, not with the first cycle on the writer thread
         self.context = foxglove.Context()
         self.writer = None if path is None else foxglove.open_mcap(path, allow_overwrite=True, context=self.context)
         ctx = self.context
@@ -84,7 +86,7 @@ class McapSink:
             topic: foxglove.Channel(topic, schema=schema, context=ctx)
             for topic, schema in ((META_TOPIC, META_SCHEMA), (EVENT_TOPIC, EVENT_SCHEMA), (STATS_TOPIC, STATS_SCHEMA))
         }
-        schema = foxglove.Schema(name=CYCLE_SCHEMA_NAME, encoding="protobuf", data=cycle_descriptor())
+        schema = foxglove.Schema(name=CYCLE_SCHEMA_NAME, encoding="protobuf", data=cycle_descriptor(telemetry))
         self.cycle = foxglove.Channel(CYCLE_TOPIC, schema=schema, message_encoding="protobuf", context=ctx).base
         self.log = fc.LogChannel(LOG_TOPIC, context=ctx)
         self.joints = fc.JointStatesChannel(JOINTS_TOPIC, context=ctx)

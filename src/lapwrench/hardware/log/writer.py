@@ -8,7 +8,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -27,6 +27,7 @@ from lapwrench.hardware.log.messages import (
 )
 from lapwrench.hardware.log.record import CycleRecord
 from lapwrench.hardware.log.sink import McapSink, json_bytes, log_time_ns
+from lapwrench.hardware.log.telemetry import checked_layout, layout_from_meta
 from lapwrench.hardware.log.topics import META_TOPIC, STATS_TOPIC
 
 if TYPE_CHECKING:
@@ -76,6 +77,9 @@ class RunLogger:
             the server cannot start), with the model's URDF.
         start: Start the writer thread now (default). With False, records queue in the rings (and
             overflow into the drop counters) until :meth:`start`; :meth:`close` starts it if needed.
+        telemetry: The cues whose telemetry the cycle messages carry, cue name → field names
+            (:mod:`.telemetry`; ValueError past its bounds). Default: the cues of the configuration
+            in ``meta["config"]`` (what ``lapwrench run`` writes there), none without one.
     """
 
     def __init__(
@@ -88,6 +92,7 @@ class RunLogger:
         transform_rate_hz: float = TRANSFORM_RATE_HZ,
         live: LiveAddress | None = None,
         start: bool = True,
+        telemetry: Mapping[str, Sequence[str]] | None = None,
     ) -> None:
         if capacity < 1 or not transform_rate_hz > 0:
             raise ValueError("capacity must be ≥ 1 and transform_rate_hz > 0")
@@ -100,8 +105,9 @@ class RunLogger:
         self.transform_rate_hz = transform_rate_hz
         self.counters = LogCounters()
         self.last_record: CycleRecord | None = None
+        self.telemetry = layout_from_meta(meta) if telemetry is None else checked_layout(telemetry)
         self._solver = FrameSolver(model) if model is not None else None
-        self._sink = McapSink(self.path, with_frames=self._solver is not None)
+        self._sink = McapSink(self.path, with_frames=self._solver is not None, telemetry=self.telemetry)
         self.live: LiveServer | None = None
         if live is not None:
             try:
@@ -228,7 +234,7 @@ class RunLogger:
         """The cycle message. A cycle on the frame grid (session time, 1 µs of slack for rounding)
         with a finite measured q also queues its frame set, written in the next rounds."""
         ns = log_time_ns(rec.t)
-        self._sink.cycle.log(encode_cycle(rec), ns)
+        self._sink.cycle.log(encode_cycle(rec, self.telemetry), ns)
         if self.live is not None:
             self.live.publish_description(ns)
         self.counters.cycles += 1

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
+from lapwrench.config_cues import MAX_TELEMETRY
 from lapwrench.hardware.log import CycleRecord
 from lapwrench.hardware.rt.sizes import MAX_POINTS, TACTILE_N
 from lapwrench.hardware.shm import Ring, pack_event
@@ -16,6 +17,10 @@ from lapwrench.robot.description import MAX_JOINTS
 
 _WRENCH_SLOT = 1 + 6
 """Places per wrench in a row: the interned name, then the 6-vector [moment; force]."""
+_N_WRENCH = 8
+_TELEMETRY_PLACES = 2 * _N_WRENCH + MAX_TELEMETRY + 1
+"""Places for the cues' telemetry in a row: per cue its interned name, its value count and the values,
+then -2 (the end); room for every cue's header and all the telemetry values the configuration allows."""
 
 
 class CycleCodec:
@@ -28,9 +33,13 @@ class CycleCodec:
     The row has a fixed width (a ring slot), so each joint vector (q, dq, tau_J, q_ref, q_cmd) has
     :data:`~lapwrench.robot.description.MAX_JOINTS` places; the row records the arm's actual joint
     count (``n_joints``, from the record's q) and only that many values are written and read back.
+
+    The cues' telemetry (``record.telemetry``, cue name → values) follows, cue by cue (its name
+    interned like the wrenches'); what passes the row's room (the configuration's bounds,
+    :data:`~lapwrench.config_cues.MAX_TELEMETRY`) is cut.
     """
 
-    N_WRENCH = 8
+    N_WRENCH = _N_WRENCH
     _spec: tuple[tuple[str, str, int], ...] = (
         ("t", "f", 1), ("robot_time", "f", 1), ("k", "f", 1), ("n_joints", "f", 1), ("q", "v", MAX_JOINTS),
         ("dq", "v", MAX_JOINTS), ("tau_J", "o", MAX_JOINTS), ("external_force", "o", 3), ("ft_force", "o", 3),
@@ -38,7 +47,7 @@ class CycleCodec:
         ("wrenches", "w", N_WRENCH), ("mode", "s", 1), ("delta", "f", 1), ("contacts", "f", 1), ("p_R", "v", 3),
         ("e_R", "v", 3), ("rcm_error", "f", 1), ("rcm_error_measured", "n", 1), ("q_ref", "v", MAX_JOINTS),
         ("q_cmd", "v", MAX_JOINTS), ("supervisor", "s", 1), ("alarm", "f", 1), ("compute_us", "f", 1),
-        ("cycle_us", "f", 1),
+        ("cycle_us", "f", 1), ("telemetry", "t", _TELEMETRY_PLACES),
     )
     OFF: ClassVar[dict[str, int]] = {}
     WIDTH = 0
@@ -48,7 +57,7 @@ class CycleCodec:
         o = 0
         for name, kind, n in cls._spec:
             cls.OFF[name] = o
-            o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": _WRENCH_SLOT * n, "s": 1, "n": 2}[kind]
+            o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": _WRENCH_SLOT * n, "s": 1, "n": 2, "t": n}[kind]
         cls.WIDTH = o
 
     def __init__(self, announce: Callable[[str, str], bool] | None = None) -> None:
@@ -121,6 +130,31 @@ class CycleCodec:
         row[off["alarm"]] = 1.0 if r.alarm else 0.0
         row[off["compute_us"]] = r.compute_us
         row[off["cycle_us"]] = r.cycle_us
+        self._encode_telemetry(row, r.telemetry)
+
+    def _encode_telemetry(self, row: np.ndarray, telemetry: dict[str, Any] | None) -> None:
+        """Each cue's name, value count and values, then the end mark (-2); cut at the row's room."""
+        o = self.OFF["telemetry"]
+        end = o + _TELEMETRY_PLACES - 1  # the last place is kept for the end mark
+        for name, values in (telemetry or {}).items():
+            n = len(values)
+            if o + 2 + n > end:
+                break
+            row[o] = self.intern("wrench", name)
+            row[o + 1] = n
+            row[o + 2 : o + 2 + n] = values
+            o += 2 + n
+        row[o] = -2.0
+
+    def _decode_telemetry(self, row: np.ndarray) -> dict[str, tuple[float, ...]]:
+        o = self.OFF["telemetry"]
+        end = o + _TELEMETRY_PLACES - 1
+        out = {}
+        while o < end and row[o] >= -1:
+            n = min(int(row[o + 1]), end - o - 2)
+            out[self._name("wrench", row[o])] = tuple(row[o + 2 : o + 2 + n].tolist())
+            o += 2 + n
+        return out
 
     def _name(self, table: str, x: float) -> str:
         t = self.tables[table]
@@ -168,6 +202,7 @@ class CycleCodec:
             alarm=bool(row[off["alarm"]]),
             compute_us=float(row[off["compute_us"]]),
             cycle_us=float(row[off["cycle_us"]]),
+            telemetry=self._decode_telemetry(row),
         )
 
 
