@@ -48,10 +48,11 @@ def main(out: str, extra: bool) -> None:
     ctrl = Controller(cfg, extra_cues=[PullToward("pull", None, cfg)] if extra else ())
     lim = ctrl.model.limits
     rows: dict[str, list[np.ndarray]] = {}
-    for _ in range(POSES):
+    for pose in range(POSES):
         mid = 0.5 * (lim.position_lower + lim.position_upper)
         q0 = mid + 0.4 * (lim.position_upper - lim.position_lower) * rng.uniform(-1.0, 1.0, 7) * 0.5
         ctrl.reset(q0)
+        ctrl.stopping = pose % 4 == 3  # every fourth pose brakes to rest (the stopping path of the tick)
         for k in range(TICKS):
             assert ctrl.ref is not None
             r = ctrl.tick(random_frame(rng, k * ctrl.dt, ctrl.ref.q))

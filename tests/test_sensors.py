@@ -82,3 +82,19 @@ def test_a_rejected_external_force_keeps_the_joint_state(validator: InputValidat
     out = validator.validate(bad)
     assert [e.source for e in out.events] == ["external_force"]
     assert out.robot is not None and out.robot.external_force is None and out.robot.q is robot.q
+
+
+def test_each_rejected_reading_has_its_event_in_reading_order(validator: InputValidator) -> None:
+    """One compiled call checks every value of the frame; the verdicts still come reading by reading."""
+    frame = SensorFrame(
+        1.0,
+        ForceTorqueReading(np.array([np.nan, 0.0, 0.0]), np.zeros(3), 1.0),
+        TactileReading(np.full(64, 300.0), 1.0),
+        InstrumentObservation(np.array([[1e5, 0.0]]), 1.0),
+        RobotReading(DEFAULT_Q0.copy(), np.full(7, 100.0), np.zeros(3), 1.0),
+    )
+    out = validator.validate(frame)
+    assert [e.source for e in out.events] == ["ft", "tactile", "instruments", "robot"]
+    assert out.ft is None and out.tactile is None and out.instruments is None and out.robot is None
+    assert "not finite" in out.events[0].message and "outside [0, 255]" in out.events[1].message
+    assert "outside the" in out.events[2].message and "velocity" in out.events[3].message

@@ -1,11 +1,12 @@
-"""Spatial algebra: the cross-product matrix, the wrench transform (eq 37-39) and the Wrench value."""
+"""Spatial algebra: the cross-product matrix, the wrench transform (eq 37-39), the Wrench value, and the
+small linear algebra the compiled tick uses in place of BLAS/LAPACK calls."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lapwrench.spatial import Wrench, skew, wrench_transform
+from lapwrench.spatial import Wrench, cholesky_inverse, cross3, inner, lu_solve, matvec, skew, wrench_transform
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -40,3 +41,42 @@ def test_the_zero_wrench_keeps_its_point() -> None:
     assert not z.vector.any()
     np.testing.assert_array_equal(z.point, [0.1, 0.2, 0.3])
     assert z.point.dtype == np.float64
+
+
+# -- the small linear algebra of the 1 kHz tick ------------------------------------------------------
+@pytest.mark.parametrize("n", [1, 2, 3, 6, 7])
+def test_cholesky_inverse_is_the_symmetric_inverse(n: int) -> None:
+    rng = np.random.default_rng(n)
+    for _ in range(5):
+        B = rng.standard_normal((n, n))
+        A = B @ B.T + 0.1 * np.eye(n)
+        A_inv, ok = cholesky_inverse(A)
+        assert ok
+        np.testing.assert_array_equal(A_inv, A_inv.T)
+        np.testing.assert_allclose(A_inv, np.linalg.inv(A), rtol=1e-10, atol=1e-12 * np.abs(A_inv).max())
+
+
+@pytest.mark.parametrize("A", [np.diag([1.0, 0.0, 2.0]), np.diag([1.0, -1.0]), np.full((2, 2), np.nan)],
+                         ids=["singular", "indefinite", "nan"])
+def test_cholesky_inverse_refuses_a_matrix_that_is_not_positive_definite(A: np.ndarray) -> None:
+    A_inv, ok = cholesky_inverse(A)
+    assert not ok and not A_inv.any()
+
+
+@pytest.mark.parametrize("n", [1, 3, 7])
+def test_lu_solve_solves_with_pivoting(n: int) -> None:
+    rng = np.random.default_rng(10 + n)
+    for _ in range(5):
+        A, b = rng.standard_normal((n, n)), rng.standard_normal(n)
+        np.testing.assert_allclose(lu_solve(A, b), np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
+    P = np.array([[0.0, 1.0], [1.0, 0.0]])  # a zero first pivot: needs the row exchange
+    np.testing.assert_allclose(lu_solve(P, np.array([2.0, 3.0])), [3.0, 2.0])
+
+
+def test_matvec_inner_and_cross3_are_numpys() -> None:
+    rng = np.random.default_rng(4)
+    A, x, a, b = rng.standard_normal((6, 7)), rng.standard_normal(7), rng.standard_normal(3), rng.standard_normal(3)
+    np.testing.assert_allclose(matvec(A, x), A @ x, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(matvec(A.T, A[:, 0]), A.T @ A[:, 0], rtol=1e-12, atol=1e-14)  # strided views
+    assert inner(x, x) == pytest.approx(x @ x, rel=1e-14)
+    np.testing.assert_allclose(cross3(a, b), np.cross(a, b), rtol=1e-14, atol=1e-15)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec, skew
+from lapwrench.spatial import Mat, Vec, cholesky_inverse, matvec
 
 # Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
 RCOND = 1e-10
@@ -19,22 +19,30 @@ def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None
 
     If the task has a known null direction ``n`` (a unit vector with nᵀ J = 0, e.g. d_z for the
     lateral RCM task), J M⁻¹ Jᵀ is singular along it and its pseudo-inverse is computed exactly
-    as (J M⁻¹ Jᵀ + n nᵀ)⁻¹ - n nᵀ.
+    as (J M⁻¹ Jᵀ + n nᵀ)⁻¹ - n nᵀ (J M⁻¹ Jᵀ + n nᵀ is positive definite: inverted by its Cholesky
+    factor; should round-off say otherwise, by :func:`regularised_inverse`).
 
     Without one, (J M⁻¹ Jᵀ)⁻¹ is :func:`regularised_inverse`: the printed inverse whenever
     J M⁻¹ Jᵀ is well conditioned (smallest eigenvalue >= ``rcond`` x the largest), a damped one
     otherwise. The printed RCM task (eq 28) needs it: its J_R has rank 2 at e_R = 0, where
     d_zᵀ J_R = -(d_z x e_R)ᵀ J_Eω vanishes, and the smallest eigenvalue of J_R M⁻¹ J_Rᵀ scales as
     |e_R|² (about 1e-10 of the largest at |e_R| = 10 µm).
+
+    J M⁻¹ is formed once: J M⁻¹ Jᵀ is (J M⁻¹) Jᵀ, evaluated in the printed order (near the damping
+    threshold A's condition number reaches 1e10, and another order of the products moves A⁻¹ by
+    1e-7), and M⁻¹ Jᵀ is its transpose (M⁻¹ is symmetric).
     """
-    JT = np.ascontiguousarray(J.T)
-    A = J @ Minv @ JT
+    JM = J @ Minv
+    A = JM @ np.ascontiguousarray(J.T)
     if null_direction is None:
         A_inv = regularised_inverse(A, rcond)
     else:
         nn = np.outer(null_direction, null_direction)
-        A_inv = np.linalg.inv(A + nn) - nn
-    return Minv @ JT @ A_inv
+        A_inv, ok = cholesky_inverse(A + nn)
+        if not ok:
+            A_inv = regularised_inverse(A + nn, rcond)
+        A_inv = A_inv - nn
+    return np.ascontiguousarray(JM.T) @ A_inv
 
 
 @kernel
@@ -50,6 +58,9 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     Moore-Penrose pseudo-inverse, so J⁺ J stays the M-orthogonal projector on the rows of J that
     are left. A = 0 gives 0. When the Frobenius condition number ‖A‖ ‖A⁻¹‖ (>= λ_max / λ_min)
     is at most 1/``rcond``, every λ >= δ and A⁻¹ is returned as ``inv(A)``, the printed formula.
+    (LAPACK's LU, like numpy's ``inv``, not a Cholesky factor: near the damping threshold the
+    condition number reaches 1e10, and only the same algorithm gives the printed formula's value
+    to 1e-9 there.)
     """
     try:
         A_inv = np.linalg.inv(A)
@@ -87,18 +98,24 @@ def nullspace_wrench(W: Mat, points: Mat, p_G: Vec) -> Vec:
     """
     W_n = np.zeros(6)
     for i in range(W.shape[0]):
-        W_n[:3] += W[i, :3] + skew(points[i] - p_G) @ W[i, 3:]
-        W_n[3:] += W[i, 3:]
+        r0, r1, r2 = points[i, 0] - p_G[0], points[i, 1] - p_G[1], points[i, 2] - p_G[2]
+        f0, f1, f2 = W[i, 3], W[i, 4], W[i, 5]
+        W_n[0] += W[i, 0] + r1 * f2 - r2 * f1
+        W_n[1] += W[i, 1] + r2 * f0 - r0 * f2
+        W_n[2] += W[i, 2] + r0 * f1 - r1 * f0
+        W_n[3] += f0
+        W_n[4] += f1
+        W_n[5] += f2
     return W_n
 
 
 @kernel
 def nullspace_torque(J_G: Mat, W_n: Vec) -> Vec:
     """Eq (37): τ_n = J_Gᵀ W_n."""
-    return np.ascontiguousarray(J_G.T) @ W_n
+    return matvec(J_G.T, W_n)
 
 
 @kernel
 def task_priority_torque(J_R: Mat, F_r: Vec, N_r: Mat, tau_n: Vec) -> Vec:
     """Eq (2): τ = J_Rᵀ F_r + N_rᵀ τ_n."""
-    return np.ascontiguousarray(J_R.T) @ F_r + np.ascontiguousarray(N_r.T) @ tau_n
+    return matvec(J_R.T, F_r) + matvec(N_r.T, tau_n)

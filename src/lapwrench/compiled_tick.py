@@ -2,8 +2,9 @@
 
 :class:`CompiledTick` binds the stages to this controller's argument types once, at reset (the
 warm-up: compilation or the cache load happen there, never in the loop), and then calls the bound
-entry points each tick with arguments of exactly those types (:func:`lapwrench.jit.bind`):
-external arrays are made C-contiguous float64 first.
+entry points each tick with arguments of exactly those types (:func:`lapwrench.jit.bind`): the
+validator hands on readings as C-contiguous float64 arrays only, Pinocchio's terms and the measured
+placement of {E} come in its own layouts (:meth:`~lapwrench.robot.model.RobotModel.terms`).
 
 When every configured cue is one of the paper's (fused into the compiled maths) the tick is one
 call (:func:`~lapwrench.tick_core.tick_stage`). With cues that run in Python (plugins) it is two,
@@ -46,7 +47,7 @@ class StageResult(NamedTuple):
     admitted: bool  # the desired acceleration met every limit and ``ref`` is the next reference
     ref: tuple[Vec, Vec, Vec] | None  # the next reference, when admitted or saturated in the compiled step
     clamped: bool
-    at_bound: np.ndarray  # the limit rows (joint box, then envelope) at a bound when saturated
+    at_bound: int  # bit mask of the limit rows (joint box, then envelope) at a bound when saturated: bit i, row i
     telemetry: dict[str, tuple[float, ...]]  # the Python cues' telemetry by cue name
     cue_faults: tuple[str, ...] = ()  # Python cues whose output was dropped this tick
 
@@ -80,7 +81,6 @@ def _points(x: object) -> Mat:
 _ZERO3 = np.zeros(3)
 _NO_TACTILE = np.zeros(64)
 _NO_POINTS = np.zeros((0, 2))
-_NO_ROWS = np.zeros(0, dtype=bool)
 _NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), {}, {}, ())
 _NO_TELEMETRY: dict[str, tuple[float, ...]] = {}
 
@@ -108,17 +108,19 @@ class CompiledTick:
         )
 
     def _tick_args(
-        self, terms: KinematicTerms, Minv: Mat, inputs: ValidInputs, measured: ScopeAxis, has_measured: bool,
-        ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
+        self, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
         robot, ft, tactile, obs = inputs.robot, inputs.ft, inputs.tactile, inputs.instruments
         ext = None if robot is None else robot.external_force
-        return (  # _sensor_args written out: this runs every tick
-            terms, Minv, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else _f64(ext), ext is not None,
-            self.feedback.offsets, measured, bool(has_measured),
-            _ZERO3 if ft is None else _f64(ft.force), _ZERO3 if ft is None else _f64(ft.torque), ft is not None,
-            _NO_TACTILE if tactile is None else _f64(tactile.values), tactile is not None,
-            _NO_POINTS if obs is None else _points(obs.points),
+        R_m, p_m, has_measured = self.feedback.measured_placement(None if robot is None else robot.q)
+        # _sensor_args written out, this runs every tick; the readings as they are: the validator hands on
+        # C-contiguous float64 arrays of the right shapes only (sensors.py), the types the tick is bound to
+        return (
+            terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
+            self.feedback.offsets, R_m, p_m, has_measured,
+            _ZERO3 if ft is None else ft.force, _ZERO3 if ft is None else ft.torque, ft is not None,
+            _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
+            _NO_POINTS if obs is None else obs.points,
             _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
         )
 
@@ -130,15 +132,15 @@ class CompiledTick:
                 bool(has_measured), self.params)
 
     def _motion_args(
-        self, kin: Kinematics, Minv: Mat, geo: object, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec,
-        stopping: bool, R_E0: Mat, may_admit: bool,
+        self, kin: Kinematics, geo: object, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec, stopping: bool,
+        R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
-        return (kin, Minv, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
+        return (kin, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
                 _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
                 self.params)
 
     # -- warm-up -------------------------------------------------------------------------------
-    def bind(self, terms: KinematicTerms, Minv: Mat, R_E0: Mat) -> None:
+    def bind(self, terms: KinematicTerms, R_E0: Mat) -> None:
         """Compile (or load from the cache) every stage for these argument types, and run each once
         on copies of the state, so the warm-up changes nothing."""
         live_rcm, live_offsets = self.rcm.state, self.feedback.offsets
@@ -147,14 +149,14 @@ class CompiledTick:
         try:
             none = ValidInputs()
             zero = np.zeros(terms.q.shape[0])
-            args = self._tick_args(terms, Minv, none, NO_AXIS, False, zero, False, R_E0, True)
+            args = self._tick_args(terms, none, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
             kin = assemble_kinematics(*terms)
             g_args = self._geometry_args(kin, None, NO_AXIS, False)
             self._geometry_stage = bind(geometry_stage, *g_args)
             geo, _ = self._geometry_stage(*g_args)
-            m_args = self._motion_args(kin, Minv, geo, none, _NO_EXTRA, zero, False, R_E0, True)
+            m_args = self._motion_args(kin, geo, none, _NO_EXTRA, zero, False, R_E0, True)
             self._motion_tail = bind(motion_tail, *m_args)
             self._motion_tail(*m_args)
         finally:
@@ -162,25 +164,23 @@ class CompiledTick:
 
     # -- one tick ------------------------------------------------------------------------------
     def run(
-        self, t: float, terms: KinematicTerms, Minv: Mat, inputs: ValidInputs, ddq_ref: Vec, stopping: bool,
-        R_E0: Mat, may_admit: bool,
+        self, t: float, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat,
+        may_admit: bool,
     ) -> StageResult:
-        """The compiled maths of one tick (module docstring); :attr:`sat` then holds the saturation inputs."""
-        measured, has_measured = self.feedback.measured_axis(None if inputs.robot is None else inputs.robot.q)
+        """The compiled maths of one tick (module docstring); when the result is not admitted, :attr:`sat`
+        holds the saturation inputs."""
         if self.cues:
-            return self._run_with_cues(t, terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0,
-                                         may_admit)
-        args = self._tick_args(terms, Minv, inputs, measured, has_measured, ddq_ref, stopping, R_E0, may_admit)
-        vec3, W, ref, at, tau, delta, contacts, has_res, non_finite, admitted, saturated, clamped = self._tick_stage(
-            *args
-        )
+            return self._run_with_cues(t, terms, inputs, ddq_ref, stopping, R_E0, may_admit)
+        args = self._tick_args(terms, inputs, ddq_ref, stopping, R_E0, may_admit)
+        vec3, has_res, W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._tick_stage(*args)
         e_R, p_R, p_G, F_lat, residual = vec3  # row views (unpacking is cheaper than indexing)
         W_r, W_h, W_c, W_f, W_n = W
-        return StageResult(
+        q, dq, ddq, tau = ref
+        return StageResult._make((  # _make: without the keyword-handling constructor (1 µs at 1 kHz)
             e_R, p_R, p_G, F_lat, residual if has_res else None, self._paper_wrenches(W_r, W_h, W_c, W_f), W_n, tau,
-            delta, contacts, non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
-            _NO_TELEMETRY,
-        )
+            delta, contacts, non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped, at,
+            _NO_TELEMETRY, (),
+        ))
 
     def _paper_wrenches(self, W_r: Vec, W_h: Vec, W_c: Vec, W_f: Vec) -> dict[str, Vec]:
         """The compiled cues' wrenches by name, those the configuration has on."""
@@ -192,9 +192,10 @@ class CompiledTick:
         return {name: w for name, w, used in on if used}
 
     def _run_with_cues(
-        self, t: float, terms: KinematicTerms, Minv: Mat, inputs: ValidInputs, measured: ScopeAxis,
-        has_measured: bool, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
+        self, t: float, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat,
+        may_admit: bool,
     ) -> StageResult:
+        measured, has_measured = self.feedback.measured_axis(None if inputs.robot is None else inputs.robot.q)
         kin = assemble_kinematics(*terms)
         robot, ft = inputs.robot, inputs.ft
         residual = None
@@ -202,13 +203,14 @@ class CompiledTick:
             residual = residual_force(kin.R_H @ _f64(ft.force), _f64(robot.external_force))
         geo, F_lat = self._geometry_stage(*self._geometry_args(kin, residual, measured, has_measured))
         extra = self._evaluate_cues(TickContext(t, kin, geo, inputs))
-        W, ref, at, tau, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail(
-            *self._motion_args(kin, Minv, geo, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
+        W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail(
+            *self._motion_args(kin, geo, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
         )
         W_r, W_h, W_c, W_f, W_n = W
+        q, dq, ddq, tau = ref
         wrenches = {**self._paper_wrenches(W_r, W_h, W_c, W_f), **extra.by_name}
         return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, W_n, tau, delta, contacts,
-                           non_finite, admitted, tuple(ref) if admitted or saturated else None, clamped, at,
+                           non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped, at,
                            extra.telemetry, extra.faults)
 
     def _evaluate_cues(self, ctx: TickContext) -> _Extra:

@@ -137,6 +137,7 @@ class Controller:
         self.event_counts: Counter[str] = Counter()
         # Test seam: f(reference, a_lo, a_hi) -> (a_lo, a_hi) narrows the joint box of a tick.
         self.bounds_hook: Callable[[ReferenceState, Vec, Vec], tuple[Vec, Vec]] | None = None
+        self._max_rcm_error = cfg.inputs.max_rcm_error
         n = self.model.nv
         self._box_names = tuple(f"joint{i + 1}" for i in range(n))
         self._hard = np.arange(n + 4) < n  # the joint box is hard, the envelope gives way to it
@@ -188,7 +189,7 @@ class Controller:
         self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues)
         terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
-        self.compiled.bind(terms, self.model.mass_matrix_inverse(q0), self.envelope.R_E0)
+        self.compiled.bind(terms, self.envelope.R_E0)
         self.stopping = False
         self.infeasible_ticks = 0
         self.events.clear()
@@ -204,12 +205,11 @@ class Controller:
             self._report(inputs.events)
         ref = self.ref
         terms = self.model.terms(ref.q, ref.dq)
-        Minv = self.model.mass_matrix_inverse(terms.q)
         assert self.envelope.R_E0 is not None
 
         # 2-7. adaptive RCM point, geometry, wrenches, allocation, integration, limit rows (compiled)
-        r = self.compiled.run(frame.time, terms, Minv, inputs, ref.ddq, self.stopping, self.envelope.R_E0,
-                              may_admit=self.bounds_hook is None)
+        r = self.compiled.run(frame.time, terms, inputs, ref.ddq, self.stopping, self.envelope.R_E0,
+                              self.bounds_hook is None)
         self.delta, self.contacts = r.delta, r.contacts
         if r.non_finite:
             self._report([InputEvent(frame.time, "controller", "non-finite torque; braking")])
@@ -232,16 +232,16 @@ class Controller:
         self.ref = ReferenceState(q, dq, ddq)
 
         e_norm = _norm(r.e_R)
-        if e_norm > self.cfg.inputs.max_rcm_error:
+        if e_norm > self._max_rcm_error:
             self._report([InputEvent(frame.time, "rcm", f"RCM error {e_norm * 1e3:.1f} mm")])
         wrenches = r.wrenches
         p = self.params
         handle = p.cue_interaction and r.delta > 0.0 and inputs.ft is not None
         mode = self._mode(handle, p.cue_tracking and inputs.instruments is not None, inputs.instruments, wrenches)
-        return TickResult(  # positional: the fields in order (cheaper than keywords at 1 kHz)
+        return TickResult._make((  # the fields in order: _make skips the keyword-handling constructor (1 µs)
             frame.time, q, dq, ddq, r.tau, wrenches, r.W_n, r.e_R, r.p_R, r.p_G, r.delta, r.contacts, mode,
             r.residual_lateral, r.residual, limits_active, self.stopping, inputs.events, r.telemetry or None,
-        )
+        ))
 
     # -- pieces of the tick -------------------------------------------------------------------
     def _report(self, events: list[InputEvent]) -> None:
@@ -276,7 +276,8 @@ class Controller:
         s = self.compiled.sat
         names = self._box_names + tuple(WALL_NAMES[i] for i in s.wall)
         if r.ref is not None:  # saturated by the compiled step with every row hard: the common case
-            sat = SaturationResult(r.ref[2], tuple(names[i] for i in np.flatnonzero(r.at_bound)), (), True)
+            at = r.at_bound
+            sat = SaturationResult(r.ref[2], tuple(names[i] for i in range(len(names)) if at >> i & 1), (), True)
         else:
             n = s.a_d.shape[0]
             m = n + 4 if self.params.envelope_enabled else n

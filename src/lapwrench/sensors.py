@@ -157,6 +157,28 @@ def joint_status(q: Vec, dq: Vec, lower: Vec, upper: Vec, tolerance: float, dq_m
     return OK
 
 
+@kernel
+def frame_status(
+    f: Vec, m: Vec, force_range: float, torque_range: float, tactile: Vec, points: Vec, width: float,
+    height: float, q: Vec, dq: Vec, lower: Vec, upper: Vec, tolerance: float, dq_max: Vec, f_ext: Vec,
+    f_ext_limit: float,
+) -> tuple[int, float, float, int, int, int, int]:
+    """Every compiled check of one frame in one call (a call from Python costs more than the checks):
+    (:func:`ft_status`'s three values, the tactile array's :func:`range_status`, :func:`points_status`,
+    :func:`joint_status`, and the external force's: finite, each component and the norm within
+    ``f_ext_limit``). The caller passes placeholders for readings that are absent and ignores their status."""
+    s_ft, nf, nm = ft_status(f, m, force_range, torque_range)
+    s_ext = range_status(f_ext, -f_ext_limit, f_ext_limit)
+    if s_ext == OK and math.sqrt(f_ext @ f_ext) > f_ext_limit:
+        s_ext = OUT_OF_RANGE
+    return (s_ft, nf, nm, range_status(tactile, 0.0, TACTILE_MAX), points_status(points, width, height),
+            joint_status(q, dq, lower, upper, tolerance, dq_max), s_ext)
+
+
+_Z3 = np.zeros(3)
+_NO_POINTS = np.zeros((0, 2))
+
+
 class InputValidator:
     """Checks each reading against its shape, finiteness and physical range."""
 
@@ -186,24 +208,51 @@ class InputValidator:
         self._dq_max = np.ascontiguousarray(velocity_factor * limits.velocity, dtype=np.float64)
         self._force_range = float(interaction.force_range)
         self._torque_range = float(interaction.torque_range)
+        self._width, self._height = float(camera.width), float(camera.height)
         # The checks bound to their argument types (C-contiguous float64 arrays, which _vector and
-        # _real_array guarantee, and floats): no numba dispatch per reading.
-        v3, q = np.zeros(3), np.zeros(self._q_lo.shape[0])
-        self._ft_status = bind(ft_status, v3, v3, 0.0, 0.0)
-        self._range_status = bind(range_status, v3, 0.0, 0.0)
-        self._points_status = bind(points_status, np.zeros((1, 2)), 0.0, 0.0)
-        self._joint_status = bind(joint_status, q, q, self._q_lo, self._q_hi, 0.0, self._dq_max)
+        # real_array guarantee, and floats): no numba dispatch per frame.
+        n = self._q_lo.shape[0]
+        self._zero_q, self._zero_tactile = np.zeros(n), np.zeros(TACTILE_ELEMENTS)
+        self._frame_status = bind(
+            frame_status, _Z3, _Z3, 0.0, 0.0, self._zero_tactile, _NO_POINTS, 0.0, 0.0, self._zero_q, self._zero_q,
+            self._q_lo, self._q_hi, 0.0, self._dq_max, _Z3, 0.0,
+        )
 
     def validate(self, frame: SensorFrame) -> ValidInputs:
         """The frame's readings that pass their checks; an :class:`InputEvent` for each one rejected.
         A valid reading is passed on as it is (the same object) when its arrays already are C-contiguous
-        float64, else rebuilt around converted copies."""
+        float64, else rebuilt around converted copies.
+
+        Shapes and types are checked here, every value in one compiled call (:func:`frame_status`);
+        then each reading's verdict, in the order ft, tactile, instruments, robot, registered inputs."""
         t = frame.time
         events: list[InputEvent] = []
-        ft = None if frame.ft is None else self._ft(frame.ft, t, events)
-        tactile = None if frame.tactile is None else self._tactile(frame.tactile, t, events)
-        instruments = None if frame.instruments is None else self._instruments(frame, events)
-        robot = None if frame.robot is None else self._robot(frame.robot, t, events)
+        ft_r, tac_r, obs_r, rob_r = frame.ft, frame.tactile, frame.instruments, frame.robot
+        n = self._q_lo.shape[0]
+        f = m = v = fext = None
+        if ft_r is not None:
+            f, m = _vector(ft_r.force, 3), _vector(ft_r.torque, 3)
+        if tac_r is not None:
+            v = _vector(tac_r.values, TACTILE_ELEMENTS)
+        pts, pts_why = (None, "") if obs_r is None else self._points(obs_r.points)
+        q = dq = None
+        if rob_r is not None:
+            q, dq = _vector(rob_r.q, n), _vector(rob_r.dq, n)
+            if rob_r.external_force is not None:
+                fext = _vector(rob_r.external_force, 3)
+        ok_ft = f is not None and m is not None
+        ok_rob = q is not None and dq is not None
+        s_ft, nf, nm, s_tac, s_pts, s_rob, s_ext = self._frame_status(
+            f if ok_ft else _Z3, m if ok_ft else _Z3, self._force_range, self._torque_range,
+            self._zero_tactile if v is None else v, _NO_POINTS if pts is None else pts, self._width, self._height,
+            q if ok_rob else self._zero_q, dq if ok_rob else self._zero_q, self._q_lo, self._q_hi,
+            self.position_tolerance, self._dq_max, _Z3 if fext is None else fext, self.max_external_force,
+        )
+        ft = None if ft_r is None else self._ft(ft_r, f if ok_ft else None, m, s_ft, nf, nm, t, events)
+        tactile = None if tac_r is None else self._tactile(tac_r, v, s_tac, t, events)
+        instruments = None if obs_r is None else self._instruments(frame, pts, pts_why, s_pts, events)
+        robot = None if rob_r is None else self._robot(rob_r, q if ok_rob else None, dq, fext, s_rob, s_ext, t,
+                                                       events)
         extra = self._extra(frame.extra, t, events) if frame.extra else {}
         return ValidInputs(ft, tactile, instruments, robot, events, extra)
 
@@ -222,12 +271,13 @@ class InputValidator:
                 valid[name] = reading
         return valid
 
-    def _ft(self, r: ForceTorqueReading, t: float, events: list[InputEvent]) -> ForceTorqueReading | None:
-        f, m = _vector(r.force, 3), _vector(r.torque, 3)
+    def _ft(
+        self, r: ForceTorqueReading, f: Vec | None, m: Vec | None, status: int, nf: float, nm: float, t: float,
+        events: list[InputEvent],
+    ) -> ForceTorqueReading | None:
         if f is None or m is None:
             events.append(InputEvent(t, "ft", "F/T reading must be two 3-vectors"))
             return None
-        status, nf, nm = self._ft_status(f, m, self._force_range, self._torque_range)
         if status == NOT_FINITE:
             events.append(InputEvent(t, "ft", "F/T reading is not finite"))
         elif status == OUT_OF_RANGE:
@@ -236,12 +286,12 @@ class InputValidator:
             return r if f is r.force and m is r.torque else ForceTorqueReading(f, m, r.stamp)
         return None
 
-    def _tactile(self, r: TactileReading, t: float, events: list[InputEvent]) -> TactileReading | None:
-        v = _vector(r.values, TACTILE_ELEMENTS)
+    def _tactile(
+        self, r: TactileReading, v: Vec | None, status: int, t: float, events: list[InputEvent]
+    ) -> TactileReading | None:
         if v is None:
             events.append(InputEvent(t, "tactile", f"tactile reading must have {TACTILE_ELEMENTS} elements"))
             return None
-        status = self._range_status(v, 0.0, TACTILE_MAX)
         if status == NOT_FINITE:
             events.append(InputEvent(t, "tactile", "tactile reading is not finite"))
         elif status == OUT_OF_RANGE:
@@ -250,13 +300,14 @@ class InputValidator:
             return r if v is r.values else TactileReading(v, r.stamp)
         return None
 
-    def _robot(self, r: RobotReading, t: float, events: list[InputEvent]) -> RobotReading | None:
-        n = self._q_lo.shape[0]
-        q, dq = _vector(r.q, n), _vector(r.dq, n)
+    def _robot(
+        self, r: RobotReading, q: Vec | None, dq: Vec | None, fext: Vec | None, status: int, ext_status: int,
+        t: float, events: list[InputEvent],
+    ) -> RobotReading | None:
         if q is None or dq is None:
+            n = self._q_lo.shape[0]
             events.append(InputEvent(t, "robot", f"robot state must hold {n} joint positions and velocities"))
             return None
-        status = self._joint_status(q, dq, self._q_lo, self._q_hi, self.position_tolerance, self._dq_max)
         if status == NOT_FINITE:
             events.append(InputEvent(t, "robot", "robot state is not finite"))
         elif status == OUTSIDE_LIMITS:
@@ -264,36 +315,36 @@ class InputValidator:
         elif status == TOO_FAST:
             events.append(InputEvent(t, "robot", "joint velocity beyond the velocity limits"))
         else:
-            fext = None
-            if r.external_force is not None:
-                fext = _vector(r.external_force, 3)
-                limit = self.max_external_force
-                if fext is None or self._range_status(fext, -limit, limit) or math.sqrt(fext.dot(fext)) > limit:
-                    events.append(InputEvent(t, "external_force", "external force estimate invalid or out of range"))
-                    fext = None
+            if r.external_force is not None and (fext is None or ext_status != OK):
+                events.append(InputEvent(t, "external_force", "external force estimate invalid or out of range"))
+                fext = None
             if q is r.q and dq is r.dq and fext is r.external_force:
                 return r
             return RobotReading(q, dq, fext, r.stamp)
         return None
 
-    def _instruments(self, frame: SensorFrame, events: list[InputEvent]) -> InstrumentObservation | None:
+    def _points(self, points: object) -> tuple[Vec | None, str]:
+        """The image points as a C-contiguous float64 (n, 2) array, or None and why not (shape, count)."""
+        pts = real_array(points)
+        if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
+            return None, "image points must be (n, 2) real numbers"
+        if len(pts) > self.max_instruments:
+            # eq (8) sums over every detection: 100 at one corner would ask 1000 N of the scope
+            return None, f"{len(pts)} detections in one frame (at most {self.max_instruments}): a detector fault"
+        return pts, ""
+
+    def _instruments(
+        self, frame: SensorFrame, pts: Vec | None, why: str, status: int, events: list[InputEvent]
+    ) -> InstrumentObservation | None:
         assert frame.instruments is not None
         cam = self.camera
 
         def reject(source: str, message: str) -> None:
             events.append(InputEvent(frame.time, source, message))
 
-        pts = real_array(frame.instruments.points)
-        if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
-            reject("instruments", "image points must be (n, 2) real numbers")
-            return None
-        if len(pts) > self.max_instruments:
-            # eq (8) sums over every detection: 100 at one corner would ask 1000 N of the scope
-            n, most = len(pts), self.max_instruments
-            reject("instruments", f"{n} detections in one frame (at most {most}): a detector fault")
-            return None
-        status = self._points_status(pts, float(cam.width), float(cam.height))
-        if status == NOT_FINITE:
+        if pts is None:
+            reject("instruments", why)
+        elif status == NOT_FINITE:
             reject("instruments", "image point is not finite")
         elif status == OUT_OF_RANGE:
             reject("instruments", f"image point outside the {cam.width}x{cam.height} image")

@@ -1,7 +1,8 @@
 """The compiled maths of one control tick, top-down like the paper's Fig. 3.
 
-:class:`~lapwrench.controller.Controller` validates the sensors and asks Pinocchio for the
-kinematics and M⁻¹ once per tick; everything after that is two compiled calls:
+:class:`~lapwrench.controller.Controller` validates the sensors and asks Pinocchio for the kinematics
+and M once per tick (M⁻¹ by M's Cholesky factor); the rest is compiled, in two stages (one call when
+no cue runs in Python, :func:`tick_stage`):
 
 1. :func:`geometry_stage`: the adaptive RCM point (eq 19-26), the RCM error (eq 27), what the
    measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry
@@ -59,8 +60,15 @@ from lapwrench.rcm.geometry import (
     rcm_error_rate,
     rcm_jacobian,
 )
-from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
-from lapwrench.spatial import Mat, Vec
+from lapwrench.robot.model import (
+    Kinematics,
+    KinematicTerms,
+    ScopeAxis,
+    assemble_kinematics,
+    inverse_inertia,
+    scope_axis,
+)
+from lapwrench.spatial import Mat, Vec, matvec
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
 from lapwrench.wrenches.rcm import rcm_force
@@ -84,7 +92,7 @@ def geometry_stage(
 
     Returns the geometry and the mapped lateral residual F_re⊥ (eq 23).
     """
-    twist = kin.J_E @ kin.dq
+    twist = matvec(kin.J_E, kin.dq)
     F_lat = adaptive_rcm_step(rcm, kin.P, residual, has_residual, twist, p.dt, adaptive)
     p_R = rcm.p_R.copy()
     e_R = rcm_error(kin, p_R)
@@ -180,7 +188,7 @@ def motion_stage(
     D = np.zeros((6, 6))
     if p.cue_viscous:
         D = p.D_guided if delta > 0.0 else p.D_unguided
-    W_f = -D @ (geo.J_G @ kin.dq)
+    W_f = -matvec(D, matvec(geo.J_G, kin.dq))
 
     # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
     n_extra = extra_W.shape[0]
@@ -199,7 +207,8 @@ def motion_stage(
     push = np.zeros(kin.q.shape[0])
     if p.joint_limit_stiffness != 0.0:
         push = joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
-    tau = task_priority_torque(geo.J_R, W_r[3:] + extra_task_F, N_r, tau_n) + N_E_T @ push - B_self @ kin.dq
+    tau = task_priority_torque(geo.J_R, W_r[3:] + extra_task_F, N_r, tau_n)
+    tau = tau + matvec(N_E_T, push) - matvec(B_self, kin.dq)
 
     # 6. integration of the virtual model, damping terms implicit
     B = damping_jacobian(geo.J_R, p.Kd, N_r, geo.J_G, D + extra_D, B_self)
@@ -221,7 +230,7 @@ def motion_stage(
         env_W, env_lo, env_hi, env_scale, env_wall = envelope_rows(
             kin, geo.p_R, a_d, depth_offset, R_E0, p.envelope, p.length, p.dt
         )
-        admitted = admitted and not _violated(env_lo, env_hi, env_W @ (kin.J_E @ a_d), env_scale)
+        admitted = admitted and not _violated(env_lo, env_hi, matvec(env_W, matvec(kin.J_E, a_d)), env_scale)
     return MotionOutput(
         W_r, W_h, W_c, W_f, W_n, delta, contacts, tau, non_finite, a_d, a_lo, a_hi, J_task,
         env_W, env_lo, env_hi, env_scale, env_wall, admitted,
@@ -229,9 +238,9 @@ def motion_stage(
 
 
 class SaturationInputs(NamedTuple):
-    """Preallocated arrays the compiled tick fills for the saturation step (used only when the desired
-    acceleration breaks a limit; overwritten every tick): the rows lo <= C a <= hi on the joint
-    acceleration, the joint box first (n rows), then the envelope's four rows through J_E."""
+    """Preallocated arrays the compiled tick fills for the saturation step on the ticks it does not admit
+    (others keep the last such tick's values): the rows lo <= C a <= hi on the joint acceleration, the
+    joint box first (n rows), then the envelope's four rows through J_E."""
 
     a_d: Vec
     J_task: Mat
@@ -288,7 +297,6 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickP
 @kernel
 def motion_tail(
     kin: Kinematics,
-    Minv: Mat,
     geo: TaskGeometry,
     ft_force: Vec,
     ft_torque: Vec,
@@ -308,43 +316,52 @@ def motion_tail(
     sat: SaturationInputs,
     p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
-    """:func:`motion_stage`, then (with ``may_admit``) the next reference: directly when the desired
-    acceleration meets every limit, through :func:`saturation_stage` when it does not. When neither
-    gives it, ``sat`` holds what the Python saturation levels need.
+    """M⁻¹ from the tick's M (:func:`~lapwrench.robot.model.inverse_inertia`), :func:`motion_stage`,
+    then (with ``may_admit``) the next reference: directly when the desired acceleration meets every
+    limit, through :func:`saturation_stage` when it does not. When it is not admitted, ``sat`` holds
+    the saturation inputs (what the Python saturation levels need when neither gives the reference).
 
-    Returns packed arrays (numba returns a few arrays much faster than many, or a named tuple):
-    ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows [q⁺, q̇⁺, q̈⁺] (valid when admitted or
-    saturated), which limit rows are at a bound, τ, and the scalars (δ, n_c, non-finite, admitted,
-    saturated, clamped).
+    Returns packed arrays (numba returns a few arrays much faster than many, or a named tuple; each
+    array it hands to Python costs about 0.5 µs): ``W`` rows [W_r, W_h, W_c, W_f, W_n], ``ref`` rows
+    [q⁺, q̇⁺, q̈⁺, τ] (the first three valid when admitted or saturated), and the scalars (which limit
+    rows are at a bound as a bit mask, bit i for row i; δ, n_c, non-finite, admitted, saturated,
+    clamped).
     """
+    Minv = inverse_inertia(kin.M)
     o = motion_stage(
         kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, extra_W, extra_points, extra_D,
         extra_task_F, ddq_ref, stopping, R_E0, depth_offset, p,
     )
-    fill_saturation_inputs(sat, o, kin, p.a_max)
     W = np.empty((5, 6))
     W[0], W[1], W[2], W[3], W[4] = o.W_r, o.W_h, o.W_c, o.W_f, o.W_n
-    ref = np.zeros((3, kin.q.shape[0]))
-    at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
+    ref = np.zeros((4, kin.q.shape[0]))
+    ref[3] = o.tau
+    at_mask = 0
     admitted = o.admitted and may_admit
+    if not admitted:
+        fill_saturation_inputs(sat, o, kin, p.a_max)
     saturated, clamped = False, False
     if admitted:
         ref[0], ref[1], ref[2], clamped = advance_reference(kin.q, kin.dq, o.a_d, o.a_lo, o.a_hi, p.dt)
     elif may_admit:
-        saturated, ref, at, clamped = saturation_stage(sat, Minv, kin.q, kin.dq, p)
-    return W, ref, at, o.tau, o.delta, o.contacts, o.non_finite, admitted, saturated, clamped
+        saturated, ref3, at, clamped = saturation_stage(sat, Minv, kin.q, kin.dq, p)
+        ref[:3] = ref3
+        for i in range(at.shape[0]):
+            if at[i]:
+                at_mask |= 1 << i
+    return W, ref, at_mask, o.delta, o.contacts, o.non_finite, admitted, saturated, clamped
 
 
 @kernel
 def tick_stage(
     terms: KinematicTerms,
-    Minv: Mat,
     rcm: AdaptiveState,
     adaptive: AdaptiveParams,
     ext_force: Vec,
     has_ext: bool,
     offsets: Vec,
-    measured: ScopeAxis,
+    R_measured: Mat,
+    p_measured: Vec,
     has_measured: bool,
     ft_force: Vec,
     ft_torque: Vec,
@@ -360,21 +377,23 @@ def tick_stage(
     p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
     """The whole compiled tick in one call, when every cue is compiled (no Python cues): the kinematics
-    from Pinocchio's terms, ΔF (eq 19) when the F/T and the robot's estimate are both valid,
+    from Pinocchio's terms, the scope axis at the measured joints from {E}'s measured placement
+    (``R_measured``, ``p_measured``), ΔF (eq 19) when the F/T and the robot's estimate are both valid,
     :func:`geometry_stage` and :func:`motion_tail`.
 
-    Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then :func:`motion_tail`'s arrays and
-    scalars.
+    Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
     """
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
     has_residual = has_ft and has_ext
-    residual = residual_force(kin.R_H @ ft_force, ext_force) if has_residual else np.zeros(3)
+    residual = residual_force(matvec(kin.R_H, ft_force), ext_force) if has_residual else np.zeros(3)
+    d_z, P = scope_axis(R_measured)
+    measured = ScopeAxis(p_measured, d_z, P)
     geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
-    W, ref, at, tau, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
-        kin, Minv, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
+    W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
+        kin, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
         np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,
     )
     vec3 = np.empty((5, 3))
     vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = geo.e_R, geo.p_R, geo.p_G, F_lat, residual
-    return vec3, W, ref, at, tau, delta, contacts, has_residual, non_finite, admitted, saturated, clamped
+    return vec3, has_residual, W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped

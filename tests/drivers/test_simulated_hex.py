@@ -7,7 +7,6 @@ from __future__ import annotations
 import socket
 from collections.abc import Iterator
 
-import numpy as np
 import pytest
 
 from lapwrench.drivers.ft.wire import CMD_BIAS, CMD_START_REALTIME, CMD_STOP, FTRecord, pack_request, unpack_record

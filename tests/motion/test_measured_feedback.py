@@ -7,9 +7,9 @@ import pytest
 
 from lapwrench.config import load
 from lapwrench.controller import Controller
-from lapwrench.motion.measured_feedback import FEEDBACK_TIME, MeasuredFeedback
+from lapwrench.motion.measured_feedback import FEEDBACK_TIME, NO_AXIS, MeasuredFeedback
 from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
-from lapwrench.robot.model import RobotModel
+from lapwrench.robot.model import RobotModel, scope_axis
 from lapwrench.sensors import RobotReading, SensorFrame
 from lapwrench.virtual import DEFAULT_Q0
 
@@ -82,3 +82,20 @@ def test_the_controller_leans_the_reference_against_a_measured_deflection() -> N
     assert e_open > 5e-4
     assert e_meas < 0.1 * e_open
     assert res.rcm_error > 0.5 * e_open
+
+
+def test_the_placement_the_compiled_tick_reads_gives_the_measured_axis() -> None:
+    """The one-call tick takes the measured axis from {E}'s placement (scope_axis inside the kernel); it
+    must be the axis :meth:`RobotModel.scope_axis_at` gives, and the identity without a measurement."""
+    fb = MeasuredFeedback(MODEL, 0.29, DT, 0.01)
+    q_meas = DEFAULT_Q0 + np.array([0.01, -0.02, 0.0, 0.03, 0.0, 0.01, 0.0])
+    R, p, has = fb.measured_placement(q_meas)
+    want = MODEL.scope_axis_at(q_meas)
+    d_z, P = scope_axis(R)
+    assert has
+    np.testing.assert_array_equal(p, want.p_E)
+    np.testing.assert_array_equal(d_z, want.d_z)
+    np.testing.assert_array_equal(P, want.P)
+    R0, p0, has0 = fb.measured_placement(None)
+    assert not has0 and not p0.any()
+    np.testing.assert_array_equal(scope_axis(R0)[1], NO_AXIS.P)

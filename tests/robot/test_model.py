@@ -1,5 +1,5 @@
 """The robot model: the end-effector Jacobian against finite differences, and the terms handed to the
-compiled tick (Pinocchio's results as C-contiguous float64, fresh each call, shapes checked)."""
+compiled tick (Pinocchio's results in its own layouts, tracking each call, shapes checked)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from helpers import kinematics_at_rest, numeric_jacobian, random_configuration, unaligned
 
 from lapwrench.robot.description import FRAME_E
-from lapwrench.robot.model import RobotModel, scope_axis
+from lapwrench.robot.model import RobotModel, inverse_inertia, scope_axis
 from lapwrench.virtual import DEFAULT_Q0
 
 
@@ -47,12 +47,32 @@ def test_end_effector_jacobian(any_model: RobotModel, seed: int) -> None:
     np.testing.assert_allclose(kin.J_E[:3], J_w, atol=1e-6)
 
 
-def test_terms_equal_pinocchio_as_c_contiguous_float64(model: RobotModel) -> None:
+def test_terms_equal_pinocchio_in_the_layouts_the_tick_is_bound_to(model: RobotModel) -> None:
+    """Pinocchio's own arrays: float64, aligned, its matrices column-major, everything else C-contiguous
+    (the compiled tick is bound to exactly these types: a change would make it misread them)."""
+    column_major = {"M_upper", "R_E", "R_H", "R_C"}
     for q, dq in _states(5):
         terms = model.terms(q, dq)
         for name, got, want in zip(terms._fields, terms, _reference_terms(model, q, dq), strict=True):
-            assert got.dtype == np.float64 and got.flags.c_contiguous and got.flags.aligned, name
+            assert got.dtype == np.float64 and got.flags.aligned, name
+            assert got.flags.f_contiguous if name in column_major else got.flags.c_contiguous, name
             np.testing.assert_array_equal(got, want, err_msg=name)
+
+
+def test_kinematics_hold_c_contiguous_copies(model: RobotModel) -> None:
+    q, dq = _states(1)[0]
+    kin = model.kinematics(q, dq)
+    for name, a in zip(kin._fields, kin, strict=True):
+        assert a.dtype == np.float64 and a.flags.c_contiguous, name
+    np.testing.assert_array_equal(kin.M, kin.M.T)
+
+
+def test_the_ticks_inverse_inertia_is_pinocchios(model: RobotModel) -> None:
+    for q, dq in _states(3):
+        M = model.kinematics(q, dq).M
+        np.testing.assert_allclose(inverse_inertia(M), model.mass_matrix_inverse(q), rtol=1e-10,
+                                   atol=1e-12 * np.abs(M).max())
+    assert np.isnan(inverse_inertia(np.diag([1.0, 0.0, 1.0]))).all()  # not positive definite: no number
 
 
 def test_terms_track_each_call_and_kinematics_are_fresh(model: RobotModel) -> None:

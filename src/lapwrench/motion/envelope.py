@@ -24,7 +24,7 @@ from lapwrench.config import EnvelopeConfig
 from lapwrench.jit import kernel
 from lapwrench.motion.saturation import LimitRows
 from lapwrench.robot.model import Kinematics
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, cross3, inner, matvec
 
 # Time constant (s) with which a rate approaches its envelope limit.
 APPROACH_TIME = 0.01
@@ -101,7 +101,7 @@ def insertion_rate_weights(d: Vec, r: Vec) -> Vec:
     (The motion of the adaptive point p_R is left out: it is slow and not the arm's doing.)
     """
     w = np.empty(6)
-    w[:3] = -np.cross(d, r)
+    w[:3] = -cross3(d, r)
     w[3:] = d
     return w
 
@@ -115,10 +115,10 @@ def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     """
     x0, d0 = np.ascontiguousarray(R_E0[:, 0]), np.ascontiguousarray(R_E0[:, 2])
     x, d = np.ascontiguousarray(R_E[:, 0]), np.ascontiguousarray(R_E[:, 2])
-    k = np.cross(d0, d)
-    kx0 = np.cross(k, x0)
-    x0s = x0 + kx0 + np.cross(k, kx0) / (1.0 + d0 @ d)
-    return math.atan2(np.cross(x0s, x) @ d, x0s @ x)
+    k = cross3(d0, d)
+    kx0 = cross3(k, x0)
+    x0s = x0 + kx0 + cross3(k, kx0) / (1.0 + inner(d0, d))
+    return math.atan2(inner(cross3(x0s, x), d), inner(x0s, x))
 
 
 @kernel
@@ -134,27 +134,27 @@ def envelope_rows(
     """
     d = kin.d_z
     r = p_R - kin.p_E
-    twist = kin.J_E @ kin.dq
+    twist = matvec(kin.J_E, kin.dq)
     # pivot: |ω⊥| bounded along its current direction u1 and across it (u2), so the polygon
     # re-aligned every tick keeps the norm at the limit; from rest, along the desired motion
     w = twist[:3].copy()
-    wd = w @ d
-    if w @ w - wd * wd < 1e-12:
-        w = np.ascontiguousarray(kin.J_E[:3]) @ (kin.dq + dt * a_d)
-        wd = w @ d
+    wd = inner(w, d)
+    if inner(w, w) - wd * wd < 1e-12:
+        w = matvec(kin.J_E[:3], kin.dq + dt * a_d)
+        wd = inner(w, d)
     u = w - wd * d
-    n = math.sqrt(u @ u)
+    n = math.sqrt(inner(u, u))
     u1 = u / n if n > 1e-9 else np.ascontiguousarray(kin.R_E[:, 0])
-    u2 = np.cross(d, u1)
+    u2 = cross3(d, u1)
     W = np.zeros((4, 6))
     W[0] = insertion_rate_weights(d, r)
     W[1, :3] = u1
     W[2, :3] = u2
     W[3, :3] = d
-    y = W @ twist
+    y = matvec(W, twist)
     # position walls: the room left once the rate has followed its bound (it lags by T)
     T = max(APPROACH_TIME, dt)
-    depth = length - d @ r + depth_offset
+    depth = length - inner(d, r) + depth_offset
     v_max, a_in = p.insertion_speed_max, p.insertion_deceleration
     v_in = wall_speed(p.depth_max - DEPTH_WALL_MARGIN - depth - max(y[0], 0.0) * T, a_in, v_max)
     v_out = wall_speed(depth - p.depth_min - DEPTH_WALL_MARGIN + min(y[0], 0.0) * T, a_in, v_max)

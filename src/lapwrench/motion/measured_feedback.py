@@ -21,10 +21,12 @@ import numpy as np
 from lapwrench.jit import kernel
 from lapwrench.rcm.geometry import insertion_depth, rcm_error
 from lapwrench.robot.model import Kinematics, RobotModel, ScopeAxis
-from lapwrench.spatial import Vec
+from lapwrench.spatial import Mat, Vec, inner
 
 FEEDBACK_TIME = 0.01  # s, time constant of the low-pass on the measured-minus-reference offsets
 NO_AXIS = ScopeAxis(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.diag([1.0, 1.0, 0.0]))  # "no measurement"
+# The same as a placement of {E} (rotation column-major, as Pinocchio's; origin), whose axis is NO_AXIS.
+NO_PLACEMENT = (np.asfortranarray(np.eye(3)), np.zeros(3))
 
 
 @kernel
@@ -45,7 +47,7 @@ def feedback_step(
         if np.isfinite(e_t).all() and math.isfinite(d_t):
             e_target, d_target = e_t, d_t
     e = offsets[:3] + gain * (e_target - offsets[:3])
-    n = math.sqrt(e @ e)
+    n = math.sqrt(inner(e, e))
     if n > cap:
         e = e * (cap / n)
     offsets[:3] = e
@@ -80,6 +82,15 @@ class MeasuredFeedback:
         if q_measured is None:
             return NO_AXIS, False
         return self.model.scope_axis_into(q_measured), True
+
+    def measured_placement(self, q_measured: Vec | None) -> tuple[Mat, Vec, bool]:
+        """{E}'s rotation and origin at the measured joints (Pinocchio, :meth:`RobotModel.placement_E_into`),
+        or :data:`NO_PLACEMENT` and False when there is none: what the compiled tick takes the measured
+        scope axis from. Valid until the model's next call."""
+        if q_measured is None:
+            return NO_PLACEMENT[0], NO_PLACEMENT[1], False
+        R, p = self.model.placement_E_into(q_measured)
+        return R, p, True
 
     def update(self, q_measured: Vec | None, kin: Kinematics, p_R: Vec, e_R: Vec) -> None:
         """One filter step; ``None`` (no valid measurement) lets the offsets decay to zero."""

@@ -16,7 +16,7 @@ scaled by ``limit_fraction``; positions keep ``position_margin`` clear of the ha
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -25,8 +25,9 @@ from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec
 
 
-@dataclass
-class ReferenceState:
+class ReferenceState(NamedTuple):
+    """The joint reference (q, q̇, q̈) of one tick (a named tuple: the controller builds one every millisecond)."""
+
     q: Vec
     dq: Vec
     ddq: Vec

@@ -24,7 +24,7 @@ import numpy as np
 from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
 from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, lu_solve
 
 
 @kernel
@@ -90,9 +90,10 @@ def euler_velocity_step(
     """One Euler step of the velocity: returns θ̇⁺ (the caller integrates θ⁺ = θ + dt θ̇⁺).
 
     ``tau`` is the full fused torque evaluated at the current θ̇ (it already contains -B θ̇);
-    ``damping`` is B, the Jacobian of -τ with respect to θ̇.
+    ``damping`` is B, the Jacobian of -τ with respect to θ̇. The n x n system is solved by
+    :func:`~lapwrench.spatial.lu_solve` (partial pivoting, as LAPACK's, without its call cost).
     """
     rhs = dt * (tau - (kin.nle - kin.gravity))
     if integrator == "explicit":
-        return kin.dq + np.linalg.solve(kin.M, rhs)
-    return kin.dq + np.linalg.solve(kin.M + dt * damping, rhs)
+        return kin.dq + lu_solve(kin.M, rhs)
+    return kin.dq + lu_solve(kin.M + dt * damping, rhs)

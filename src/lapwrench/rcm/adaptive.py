@@ -41,7 +41,7 @@ import numpy as np
 from lapwrench.config import AdaptiveRcmConfig
 from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, inner, matvec
 
 GATE_SIGNALS = ("angular_speed", "linear_speed", "angular_acceleration", "linear_acceleration")
 
@@ -117,7 +117,7 @@ def dead_zone_saturation(residual: Vec, gamma1: float, gamma2: float, F_op: floa
 @kernel
 def lateral_component(P: Mat, F_re: Vec) -> Vec:
     """Eq (23): F_re⊥ = P(θ) F_re, the part of the residual orthogonal to the shaft."""
-    return P @ F_re
+    return matvec(P, F_re)
 
 
 @kernel
@@ -156,11 +156,11 @@ def gate_weight(st: AdaptiveState, P: Mat, twist: Vec, dt: float, p: AdaptivePar
     step = k * (twist - st.twist_f)
     st.twist_f[:] = st.twist_f + step
     accel = step / dt
-    w_ang, a_ang = P @ twist[:3], P @ accel[:3]
-    sc[3] = math.sqrt(w_ang @ w_ang)
-    sc[4] = math.sqrt(twist[3:] @ twist[3:])
-    sc[5] = math.sqrt(a_ang @ a_ang)
-    sc[6] = math.sqrt(accel[3:] @ accel[3:])
+    w_ang, a_ang = matvec(P, twist[:3]), matvec(P, accel[:3])
+    sc[3] = math.sqrt(inner(w_ang, w_ang))
+    sc[4] = math.sqrt(inner(twist[3:], twist[3:]))
+    sc[5] = math.sqrt(inner(a_ang, a_ang))
+    sc[6] = math.sqrt(inner(accel[3:], accel[3:]))
     w_raw = min(
         gate_ramp(sc[3], p.gate_angular_speed, p.gate_soft),
         gate_ramp(sc[4], p.gate_linear_speed, p.gate_soft),
@@ -189,7 +189,7 @@ def adaptive_rcm_step(
     if has_residual:
         F_lat = lateral_component(P, dead_zone_saturation(residual, p.gamma1, p.gamma2, p.F_op, p.ramp))
     st.velocity[:] = rcm_point_rate(w * F_lat, st.p_R, st.p_R_anchor, p.alpha, p.beta)
-    if math.sqrt(st.velocity @ st.velocity) <= p.epsilon:  # eq (25)
+    if math.sqrt(inner(st.velocity, st.velocity)) <= p.epsilon:  # eq (25)
         st.p_R_anchor[:] = st.p_R  # eq (26)
         st.scalars[2] += 1.0
     st.p_R[:] = st.p_R + dt * st.velocity

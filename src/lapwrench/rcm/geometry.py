@@ -12,7 +12,7 @@ import numpy as np
 
 from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics, ScopeAxis
-from lapwrench.spatial import Mat, Vec, skew
+from lapwrench.spatial import Mat, Vec, inner, matvec, skew
 
 
 class TaskGeometry(NamedTuple):
@@ -39,13 +39,13 @@ def initial_rcm_point(kin: Kinematics | ScopeAxis, length: float, lambda0: float
 @kernel
 def rcm_error(kin: Kinematics | ScopeAxis, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
-    return kin.P @ (p_R - kin.p_E)
+    return matvec(kin.P, p_R - kin.p_E)
 
 
 @kernel
 def insertion_depth(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
-    return length - float(kin.d_z @ (p_R - kin.p_E))
+    return length - inner(kin.d_z, p_R - kin.p_E)
 
 
 @kernel
@@ -54,7 +54,7 @@ def axis_rcm_error_and_depth(p_E: Vec, d_z: Vec, P: Mat, p_R: Vec, length: float
     measured joints): array arguments only, so the call from Python is cheap."""
     axis = ScopeAxis(p_E, d_z, P)
     e = rcm_error(axis, p_R)
-    return math.sqrt(e @ e), insertion_depth(axis, p_R, length)
+    return math.sqrt(inner(e, e)), insertion_depth(axis, p_R, length)
 
 
 @kernel
@@ -87,19 +87,19 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """
     d = kin.d_z
     r = p_R - kin.p_E
-    return (d @ r) * skew(d) @ np.ascontiguousarray(kin.J_E[:3]) - kin.P @ np.ascontiguousarray(kin.J_E[3:])
+    return inner(d, r) * skew(d) @ np.ascontiguousarray(kin.J_E[:3]) - kin.P @ np.ascontiguousarray(kin.J_E[3:])
 
 
 @kernel
 def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
-    return J_R @ kin.dq + kin.P @ rcm_velocity
+    return matvec(J_R, kin.dq) + matvec(kin.P, rcm_velocity)
 
 
 @kernel
 def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
-    s = float(kin.d_z @ (p_R - kin.p_E)) / length
+    s = inner(kin.d_z, p_R - kin.p_E) / length
     return min(1.0, max(0.0, s))
 
 

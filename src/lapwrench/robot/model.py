@@ -23,7 +23,7 @@ from lapwrench.robot.description import (
     build_urdf,
 )
 from lapwrench.robot.limits import JointLimits, arm_limits
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, cholesky_inverse
 
 
 class Kinematics(NamedTuple):
@@ -60,14 +60,24 @@ class Kinematics(NamedTuple):
 @kernel
 def scope_axis(R_E: Mat) -> tuple[Vec, Mat]:
     """Eqs (16)-(17): d_z = R_E I_z (the laparoscope direction) and P = I3 - d_z d_zᵀ."""
-    d = R_E[:, 2].copy()
-    return d, np.eye(3) - np.outer(d, d)
+    d = np.empty(3)
+    for i in range(3):
+        d[i] = R_E[i, 2]
+    P = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            P[i, j] = (1.0 if i == j else 0.0) - d[i] * d[j]
+    return d, P
 
 
 class KinematicTerms(NamedTuple):
     """What Pinocchio gives per tick, before :func:`assemble_kinematics` (frames' origins and rotations in
     {B}; ``M_upper`` has only its upper triangle filled; ``J`` is Pinocchio's ``[J_v; J_ω]`` of {E},
-    LOCAL_WORLD_ALIGNED)."""
+    LOCAL_WORLD_ALIGNED).
+
+    The arrays are Pinocchio's own, as it gives them (:meth:`RobotModel.terms`): its matrices are
+    column-major (``M_upper``, the rotations); :func:`assemble_kinematics` copies everything into the
+    C-contiguous arrays of :class:`Kinematics`, so nothing converts them beforehand."""
 
     q: Vec
     dq: Vec
@@ -114,16 +124,15 @@ def assemble_kinematics(
 
 
 @kernel
-def fill_terms(out: KinematicTerms, q: Vec, dq: Vec, M_upper: Mat, R_E: Mat, R_H: Mat, R_C: Mat, J: Mat) -> None:
-    """Copy the joint state and Pinocchio's matrices (column-major, in its own memory) into ``out``'s
-    C-contiguous arrays: one compiled call instead of several NumPy conversions per tick."""
-    out.q[:] = q
-    out.dq[:] = dq
-    out.M_upper[:] = M_upper
-    out.R_E[:] = R_E
-    out.R_H[:] = R_H
-    out.R_C[:] = R_C
-    out.J[:] = J
+def inverse_inertia(M: Mat) -> Mat:
+    """M⁻¹ of the joint-space inertia (symmetric positive definite) by its Cholesky factor
+    (:func:`~lapwrench.spatial.cholesky_inverse`): once per tick inside the compiled maths, from the M
+    Pinocchio gave. Not a number everywhere when M is not positive definite (e.g. at a non-finite q),
+    so the tick's non-finite guard sees it."""
+    Minv, ok = cholesky_inverse(M)
+    if not ok:
+        Minv[:] = np.nan
+    return Minv
 
 
 class ScopeAxis(NamedTuple):
@@ -182,24 +191,20 @@ class RobotModel:
         self._bind_per_tick_calls()
 
     def _bind_per_tick_calls(self) -> None:
-        """The arrays :meth:`terms` and :meth:`scope_axis_into` return, and their fill kernels bound to
-        exactly these argument types (:func:`lapwrench.jit.bind`).
+        """The arrays :meth:`terms` and :meth:`scope_axis_into` hand out, and the kernels bound to exactly
+        their types (:func:`lapwrench.jit.bind`).
 
-        Pinocchio's vectors are returned as they are: views of its memory (``data.nle``, a frame's
-        ``translation``), which track every update. Its matrices are column-major, so they are copied
-        into C-contiguous arrays by one compiled call per tick.
+        Pinocchio's arrays are handed out as they are: views of its memory (``data.M``, ``data.nle``, a
+        frame's ``rotation`` and ``translation``), which track every update; its matrices are
+        column-major, and the compiled tick is bound to that layout. Only the Jacobian is a fresh array
+        per call.
         """
         data, n = self.data, self.nv
         E, H, C = (data.oMf[f] for f in (self.frame_E, self.frame_H, self.frame_C))
-        self._pin_matrices = (data.M, E.rotation, H.rotation, C.rotation)
-        self._terms = KinematicTerms(
-            np.zeros(n), np.zeros(n), np.zeros((n, n)), data.nle, data.g, E.translation, np.eye(3), H.translation,
-            np.eye(3), C.translation, np.eye(3), np.zeros((6, n)),
-        )
-        t = self._terms
-        J = pin.getFrameJacobian(self.model, data, self.frame_E, self._lwa)
-        self._fill_terms = bind(fill_terms, t, t.q, t.dq, *self._pin_matrices, J)
-        self._assemble = bind(assemble_kinematics, *t)
+        self._views = (data.M, data.nle, data.g, E.translation, E.rotation, H.translation, H.rotation,
+                       C.translation, C.rotation)
+        self._q, self._dq = np.zeros(n), np.zeros(n)
+        self._assemble = bind(assemble_kinematics, *self.terms(np.zeros(n), np.zeros(n)))
         axis_E = self._axis_data.oMf[self.frame_E]
         self._axis_placement = (axis_E.rotation, axis_E.translation)
         self._axis = ScopeAxis(np.zeros(3), np.zeros(3), np.zeros((3, 3)))
@@ -211,19 +216,25 @@ class RobotModel:
 
     def terms(self, q: Vec, dq: Vec) -> KinematicTerms:
         """Pinocchio at (q, dq): one ``computeAllTerms``, the frame placements and the {E} Jacobian, as
-        C-contiguous float64 arrays (the types the compiled tick is bound to).
+        float64 arrays in the layouts the compiled tick is bound to (Pinocchio's own: its matrices are
+        column-major).
 
-        No allocation: the arrays are this model's own or views of Pinocchio's memory, all overwritten
-        by the next evaluation on this model (:meth:`terms`, :meth:`kinematics`, :meth:`mass_matrix_inverse`,
-        :meth:`frame_pose`). Use them before, or copy them (:meth:`kinematics` does)."""
+        Hardly any allocation: q and dq are copied into this model's arrays, the rest are views of
+        Pinocchio's memory, all overwritten by the next evaluation on this model (:meth:`terms`,
+        :meth:`kinematics`, :meth:`mass_matrix_inverse`, :meth:`frame_pose`); only the Jacobian is
+        fresh. Use them before, or copy them (:meth:`kinematics` does)."""
         model, data = self.model, self.data
         q = _vector_arg(q, model.nq, "q")
         dq = _vector_arg(dq, self.nv, "dq")
         pin.computeAllTerms(model, data, q, dq)
         pin.updateFramePlacements(model, data)
         J = pin.getFrameJacobian(model, data, self.frame_E, self._lwa)
-        self._fill_terms(self._terms, q, dq, *self._pin_matrices, J)
-        return self._terms
+        if not J.flags.c_contiguous:  # the layout the tick is bound to (Pinocchio gives it)
+            J = np.ascontiguousarray(J)
+        self._q[:] = q
+        self._dq[:] = dq
+        M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C = self._views
+        return KinematicTerms(self._q, self._dq, M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C, J)
 
     def kinematics(self, q: Vec, dq: Vec) -> Kinematics:
         """Evaluate the model at (q, dq) (:meth:`terms`, :func:`assemble_kinematics`); fresh arrays."""
@@ -248,8 +259,14 @@ class RobotModel:
         placement (a few µs), on a workspace of its own so it never disturbs the tick's
         :meth:`terms`. Non-finite ``q`` gives non-finite values. The arrays are this model's own,
         overwritten by the next call here or in :meth:`scope_axis_at` (the 1 kHz path allocates nothing)."""
+        self._fill_scope_axis(self._axis, *self.placement_E_into(q))
+        return self._axis
+
+    def placement_E_into(self, q: Vec) -> tuple[Mat, Vec]:
+        """{E}'s rotation (column-major) and origin in {B} at joints ``q``, on :meth:`scope_axis_into`'s
+        workspace: views of Pinocchio's memory, overwritten by the next call here or there. The
+        compiled tick takes the scope axis at the measured joints from these."""
         model, data = self.model, self._axis_data
         pin.forwardKinematics(model, data, _vector_arg(q, model.nq, "q"))
         pin.updateFramePlacement(model, data, self.frame_E)
-        self._fill_scope_axis(self._axis, *self._axis_placement)
-        return self._axis
+        return self._axis_placement

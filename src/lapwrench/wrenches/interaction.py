@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec, Wrench
+from lapwrench.spatial import Mat, Vec, Wrench, matvec
 from lapwrench.wrenches.base import Cue, TickContext
 
 
 @kernel
 def surgeon_wrench(force_H: Vec, torque_H: Vec, R_H: Mat) -> tuple[Vec, Vec]:
     """Eq (5): W_s = [M_s; F_s] with the sensor components on the {H} axes, returned in {B}."""
-    return R_H @ torque_H, R_H @ force_H
+    return matvec(R_H, torque_H), matvec(R_H, force_H)
 
 
 @kernel
@@ -37,7 +37,7 @@ def interaction_wrench(force_H: Vec, torque_H: Vec, R_H: Mat, delta: float) -> t
     Only the axial torque and the three forces are kept: under the RCM the scope has four DOFs.
     """
     moment = delta * torque_H[2] * np.ascontiguousarray(R_H[:, 2])
-    force = delta * (R_H @ force_H)
+    force = delta * matvec(R_H, force_H)
     return moment, force
 
 

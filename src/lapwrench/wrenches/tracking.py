@@ -10,7 +10,7 @@ import numpy as np
 from lapwrench.config import CameraConfig, Config, TrackingConfig
 from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
-from lapwrench.spatial import Mat, Vec, Wrench
+from lapwrench.spatial import Mat, Vec, Wrench, inner, matvec
 from lapwrench.wrenches.base import Cue, TickContext
 
 
@@ -52,7 +52,7 @@ def tracking_force_magnitude(d: float, p: TrackingParams) -> float:
 @kernel
 def unit_depth_ray(u: float, v: float, p: TrackingParams, R_C: Mat) -> Vec:
     """Eq (11): P'_i = (u_i - u0)/f_x x_C + (v_i - v0)/f_y y_C + z_C, in {B}."""
-    return R_C @ np.array([(u - p.u0) / p.fx, (v - p.v0) / p.fy, 1.0])
+    return matvec(R_C, np.array([(u - p.u0) / p.fx, (v - p.v0) / p.fy, 1.0]))
 
 
 @kernel
@@ -69,8 +69,8 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
     1 s on the virtual dynamics), out of the incision. ``printed`` stays available.
     Returns zeros when the ray is along z_C (the instrument sits on the principal point).
     """
-    w = ray - ray @ z_C * z_C if variant == "image_plane" else np.cross(np.cross(z_C, ray), ray)
-    n = math.sqrt(w @ w)
+    w = ray - inner(ray, z_C) * z_C if variant == "image_plane" else np.cross(np.cross(z_C, ray), ray)
+    n = math.sqrt(inner(w, w))
     return w / n if n > 1e-12 else np.zeros(3)
 
 
@@ -86,7 +86,7 @@ def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
         mag = tracking_force_magnitude(pixel_distance(u, v, p.u0, p.v0), p)
         if mag > 0.0:
             F += mag * tracking_direction(unit_depth_ray(u, v, p, R_C), z_C, p.direction)
-    norm = math.sqrt(F @ F)
+    norm = math.sqrt(inner(F, F))
     return F * (p.F_sum_max / norm) if norm > p.F_sum_max else F
 
 
