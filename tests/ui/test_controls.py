@@ -10,6 +10,7 @@ import pytest
 from lapwrench.config import Config
 from lapwrench.ui.controls import Controls, status_text
 from lapwrench.ui.inputs import UiInputError
+from lapwrench.ui.playback import PLAYABLE
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.session import Session
 
@@ -67,3 +68,18 @@ def test_refresh_shows_resume_only_while_held_and_keeps_the_gizmo_on_the_handle(
     held = snap.__class__(**{**snap.__dict__, "held": "rcm_error"})
     controls.refresh(held, 25.0)
     assert controls.resume_button.visible
+
+
+def test_every_playable_scenario_has_a_button_and_the_status_line_says_which_one_plays(controls: Controls) -> None:
+    assert set(controls.play) == set(PLAYABLE)
+    session = controls.session
+    session.play("workflow")
+    for _ in range(20):
+        session.step()
+    snap = session.snapshot
+    assert snap is not None
+    assert "playing workflow (0.0 s)" in status_text(snap, 1.0, False, 25.0)
+    session.stop_script()
+    for _ in range(10):
+        session.step()
+    assert "playing" not in status_text(session.snapshot, 1.0, False, 25.0)

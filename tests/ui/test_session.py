@@ -119,7 +119,7 @@ def test_the_incision_shift_moves_the_housing_and_reset_starts_over(session: Ses
 
 def test_the_scripted_view_adjustment_grips_and_turns(session: Session) -> None:
     _, d0 = session.closed.world.shaft_axis()
-    session.play_view_adjustment()
+    session.play("view-adjustment")
     run(session, 1.0)
     snap = session.snapshot
     assert snap is not None and snap.script and snap.delta > 0.5

@@ -28,7 +28,8 @@ from lapwrench.sim import cue_scenarios
 from lapwrench.sim.hard_push import hard_push as run_hard_push
 from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, run_metrics
-from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, InstrumentPath, rotate_axis
+from lapwrench.sim.scripts import NeedleSearch, Script, ViewAdjustment, Workflow, park_instruments
+from lapwrench.sim.surgeon import HousingDisturbance
 from lapwrench.sim.video import VideoWriter
 from lapwrench.sim.world import CONTROL_DT
 
@@ -36,20 +37,6 @@ PAPER = {
     "grip": {"delta": [2.01, 1.13, 0.28], "completion_s": [6.32, 11.0, 19.46]},
     "rcm-disturbance": {"load_time_s": 3.6, "threshold_N": 5.0},
 }
-TISSUE_DEPTH = 0.145  # m below the incision (the phantom's tissue surface)
-# Largest push (N) of the scripted surgeon's speed-driven hand in the tracking scenarios. With the
-# paper's k_t = 150 N m s (Fig. 4 speeds: ~1.7 deg/s under 10 N at grip gain 2) a 15 N hand takes
-# ~15 s for the ~26 deg view changes of these scripts; 25 N does them in ~9 s.
-HAND_FORCE = 25.0
-
-
-def _tissue_point(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
-    return loop.world.incision_rest_position() + np.array([x, y, -TISSUE_DEPTH])
-
-
-def _axis_toward(loop: ClosedLoop, x: float, y: float) -> np.ndarray:
-    v = np.array([x, y, -TISSUE_DEPTH])
-    return v / np.linalg.norm(v)
 
 
 def _pixel_error(loop: ClosedLoop, index: int) -> float:
@@ -59,16 +46,6 @@ def _pixel_error(loop: ClosedLoop, index: int) -> float:
     if depth[0] <= 0 or not (0 <= u < cam.width and 0 <= v < cam.height):
         return float("nan")
     return float(math.hypot(u - cam.u0, v - cam.v0))
-
-
-def _park_instrument(loop: ClosedLoop, index: int) -> None:
-    """An instrument withdrawn into its port: tip 2 cm inside the wall, out of the view."""
-    loop.world.set_instrument_tip(index, loop.world.port_position(index) + np.array([0.0, 0.0, -0.02]))
-
-
-def _park_instruments(loop: ClosedLoop) -> None:
-    for i in range(loop.world.n_instruments):
-        _park_instrument(loop, i)
 
 
 # --------------------------------------------------------------------------- grip (Fig. 4)
@@ -83,10 +60,8 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
     limit = 60.0 * opts.time_scale
     for label, grip_force in levels:
         loop = ClosedLoop(cfg, seed=opts.seed, world=opts.world)
-        _park_instruments(loop)
-        _, d0 = loop.world.shaft_axis()
-        hand = opts.world.hand(HandGuide(rotate_axis(d0, [1.0, 1.0, 0.0], 10.0 * opts.time_scale),
-                                         grip_force=grip_force))
+        park_instruments(loop.world)
+        hand = ViewAdjustment(grip_force, 10.0 * opts.time_scale, opts.world).start(loop.world)
         trace = Trace()
         t0 = time.perf_counter()
         while loop.t < limit and (hand.engaged or loop.t < (hand.done_time or 0) + 0.5):
@@ -126,7 +101,7 @@ def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Sce
     dist = HousingDisturbance(start=3.6, shift=(0.0, opts.world.incision_shift_mm / 1000.0))
     for label, enabled in (("with adaptation", True), ("without adaptation", False)):
         loop = ClosedLoop(cfg.replace(adaptive_rcm={"enabled": enabled}), seed=opts.seed, world=opts.world)
-        _park_instruments(loop)
+        park_instruments(loop.world)
         trace = Trace()
         t0 = time.perf_counter()
         while loop.t < duration:
@@ -168,14 +143,9 @@ def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Sce
 # --------------------------------------------------------------------------- needle search (Fig. 6-7)
 
 
-def _scripted_run(
-    name: str,
-    cfg: Config,
-    opts: ScenarioOptions,
-    duration: float,
-    script: Callable[[ClosedLoop, float], float],
-    track_index: int = 0,
-) -> ScenarioResult:
+def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> ScenarioResult:
+    """Step ``script`` (:mod:`lapwrench.sim.scripts`) in a closed loop for its duration."""
+    name = script.name
     snapshots: list[tuple[np.ndarray, str]] = []
     writer = None
     if opts.video_dir is not None:
@@ -192,16 +162,16 @@ def _scripted_run(
     trace = Trace()
     t0 = time.perf_counter()
     try:
-        while loop.t < duration:
-            grip_force = script(loop, loop.t)
+        while loop.t < script.duration:
+            grip_force = script(loop.world, loop.t)
             res = loop.step(grip_force)
-            loop.record(trace, res, pixel_error=_pixel_error(loop, track_index))
+            loop.record(trace, res, pixel_error=_pixel_error(loop, script.track_index))
             if opts.progress and round(loop.t * 1000) % 100 == 0:
                 opts.progress(0.1)
     finally:
         if writer is not None:
             writer.close()
-    m = run_metrics(loop, trace, time.perf_counter() - t0, track_index)
+    m = run_metrics(loop, trace, time.perf_counter() - t0, script.track_index)
     modes = list(trace["mode"])
     timeline = []
     for k, mode in enumerate(modes):
@@ -219,47 +189,9 @@ def _scripted_run(
 
 def needle_search(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Tracking only (t0-t3) → handle & tracking (t3-t5) → handle dominant, search (t5-t7) →
-    release, tracking re-engages on the instrument brought to the needle (t7-t9)."""
-    s = opts.time_scale
-    needle = (-0.035, 0.05)
-    state: dict[str, object] = {}
-
-    def script(loop: ClosedLoop, t: float) -> float:
-        if "hand" not in state:
-            _, _d0 = loop.world.shaft_axis()
-            state["hand"] = opts.world.hand(HandGuide(
-                _axis_toward(loop, needle[0] + 0.004, needle[1] - 0.012),
-                grip_force=24.0,
-                max_force=HAND_FORCE,
-                max_speed=0.25,
-                tolerance_deg=1.5,
-            ))
-            state["local"] = InstrumentPath(
-                _tissue_point(loop, 0, 0),
-                [(0.012, -0.004), (0.0, 0.008), (0.014, 0.006), (0.01, -0.006)],
-                speed=0.006 / s,
-            )
-            state["fetch"] = InstrumentPath(
-                _tissue_point(loop, 0, 0),
-                [(0.01, -0.006), (0.03, 0.01), (needle[0] + 0.012, needle[1] - 0.004)],
-                speed=0.012 / s,
-            )
-            _park_instrument(loop, 1)
-        hand: HandGuide = state["hand"]  # type: ignore[assignment]
-        t3, t7 = 6.0 * s, state.get("t7")
-        if t7 is None:
-            loop.world.set_instrument_tip(0, state["local"].tip(t))  # type: ignore[attr-defined]
-        else:
-            loop.world.set_instrument_tip(0, state["fetch"].tip(t - t7))  # type: ignore[attr-defined]
-        if t < t3:
-            loop.world.set_hand_wrench()  # hand off
-            return 0.0
-        grip_force = hand.apply(loop.world, t, CONTROL_DT)
-        if not hand.engaged and t7 is None:
-            state["t7"] = t
-        return grip_force
-
-    return _scripted_run("needle-search", cfg, opts, 26.0 * s, script)
+    release, tracking re-engages on the instrument brought to the needle (t7-t9)
+    (:class:`~lapwrench.sim.scripts.NeedleSearch`)."""
+    return _scripted_run(cfg, opts, NeedleSearch(opts.time_scale, opts.world))
 
 
 # --------------------------------------------------------------------------- workflow (Fig. 9)
@@ -267,43 +199,9 @@ def needle_search(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Scena
 
 def workflow(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Handle to the first gauze pad, tracking while it is picked up and the second one found,
-    handle again toward the gallbladder, tracking to the end (Fig. 9, 40 s)."""
-    s = opts.time_scale
-    gauze1, gauze2, organ = (0.05, 0.055), (-0.06, -0.05), (0.04, -0.03)
-    state: dict[str, object] = {}
-
-    def script(loop: ClosedLoop, t: float) -> float:
-        if not state:
-            for key, target in (("hand1", gauze1), ("hand2", organ)):
-                state[key] = opts.world.hand(HandGuide(
-                    _axis_toward(loop, *target), grip_force=30.0, max_force=HAND_FORCE, max_speed=0.25,
-                    tolerance_deg=1.5,
-                ))
-            state["tool"] = InstrumentPath(
-                _tissue_point(loop, 0, 0),
-                [
-                    (0.02, 0.02),
-                    (gauze1[0] - 0.005, gauze1[1] - 0.01),
-                    (0.03, 0.02),
-                    (0.0, -0.01),
-                    (gauze2[0] + 0.01, gauze2[1] + 0.01),
-                    (0.0, -0.02),
-                    (organ[0] - 0.005, organ[1]),
-                ],
-                speed=0.01,
-            )
-            _park_instrument(loop, 1)
-        loop.world.set_instrument_tip(0, state["tool"].tip(max(0.0, t - 3.0 * s) / s))  # type: ignore[attr-defined]
-        h1: HandGuide = state["hand1"]  # type: ignore[assignment]
-        h2: HandGuide = state["hand2"]  # type: ignore[assignment]
-        if t < 13.0 * s and h1.engaged:
-            return h1.apply(loop.world, t, CONTROL_DT)
-        if 30.0 * s <= t and h2.engaged:
-            return h2.apply(loop.world, t, CONTROL_DT)
-        loop.world.set_hand_wrench()  # hand off
-        return 0.0
-
-    return _scripted_run("workflow", cfg, opts, 40.0 * s, script)
+    handle again toward the gallbladder, tracking to the end (Fig. 9, 40 s;
+    :class:`~lapwrench.sim.scripts.Workflow`)."""
+    return _scripted_run(cfg, opts, Workflow(opts.time_scale, opts.world))
 
 
 # --------------------------------------------------------------------------- hard push (issue 9)

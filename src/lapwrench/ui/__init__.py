@@ -9,6 +9,7 @@ Modules, one job each:
 - :mod:`.session`: the simulated session: the closed loop, the hand's and the instruments' inputs,
   holds and resumes, parameter changes, per-cycle callbacks (e.g. a telemetry publisher).
 - :mod:`.inputs`: validation of the page's values and the hand's force model (no viser).
+- :mod:`.playback`: the paper's scenarios played in the session (:mod:`lapwrench.sim.scripts`).
 - :mod:`.history`: the scrolling window of plotted signals.
 - :mod:`.runner`: the thread stepping the session at wall-clock pace, measuring the real-time factor.
 - :mod:`.view`: the laparoscope view rendered in its own thread, annotated.

@@ -13,8 +13,11 @@ from typing import Any
 import numpy as np
 
 from lapwrench.ui.inputs import GIZMO_STIFFNESS, GRIP_LEVELS, MAX_DELTA, MAX_HAND_FORCE, MAX_HAND_TORQUE, UiInputError
+from lapwrench.ui.playback import PLAYABLE
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.session import DETECTORS, INSTRUMENT_REACH, Session, Snapshot
+
+GIZMO_SCALE = 0.12  # m, the length of the handle gizmo's arrows in the scene
 
 
 def status_text(snapshot: Snapshot | None, rtf: float, paused: bool, view_fps: float) -> str:
@@ -25,7 +28,7 @@ def status_text(snapshot: Snapshot | None, rtf: float, paused: bool, view_fps: f
     fps = f"{view_fps:.0f} fps" if np.isfinite(view_fps) else "… fps"
     held = f" · **HELD: {snapshot.held}**" if snapshot.held else ""
     extra = "".join([" · incision shifted" if snapshot.disturbance else "",
-                     " · scripted hand" if snapshot.script else ""])
+                     f" · playing {snapshot.script_name} ({snapshot.script_time:.1f} s)" if snapshot.script else ""])
     alarms = f"\n\nalarms: {'; '.join(snapshot.alarms)}" if snapshot.alarms else ""
     return (f"t = {snapshot.t:.2f} s · {speed} · view {fps} · mode **{snapshot.mode}** · δ = {snapshot.delta:.2f}"
             f" · RCM error {snapshot.rcm_error_mm:.2f} mm{held}{extra}{alarms}")
@@ -47,8 +50,15 @@ class Controls:
         self._build_hand(gui)
         self._build_instruments(gui)
         self._build_scenarios(gui)
-        self.gizmo = server.scene.add_transform_controls("/handle_gizmo", scale=0.12, disable_rotations=True)
-        self.gizmo.on_update(self.guarded(self._on_gizmo))
+        self.gizmo = server.scene.add_transform_controls("/handle_gizmo", scale=GIZMO_SCALE, disable_rotations=True)
+        on_gizmo = self.guarded(self._on_gizmo)
+
+        async def on_gizmo_in_order(event: Any) -> None:
+            """On viser's event loop, so start, updates and end arrive in order (a plain callback runs
+            in a thread pool, where a late update could follow the end and leave the hand pushing)."""
+            on_gizmo(event)
+
+        self.gizmo.on_update(on_gizmo_in_order)
 
     def guarded(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         """``fn`` with its errors shown on the page instead of raised."""
@@ -135,11 +145,16 @@ class Controls:
     def _build_scenarios(self, gui: Any) -> None:
         with gui.add_folder("Scenarios"):
             self.shift = gui.add_checkbox("shift the incision 10 mm (Fig. 5)", False)
-            self.play = gui.add_button("Play Fig. 4: turn the view 10° at this grip")
+            self.play = {name: gui.add_button(f"Play {label}") for name, label in PLAYABLE.items()}
+            self.stop_script = gui.add_button("Stop the scenario")
+            gui.add_markdown("A scenario plays from where the scope is (Reset first to start as in the paper); "
+                             "its hand and instruments move, and yours still push.")
             self.pause = gui.add_button("Pause")
             self.reset = gui.add_button("Reset")
         self.shift.on_update(self.guarded(lambda e: self.session.set_disturbance(bool(e.target.value))))
-        self.play.on_click(self.guarded(lambda _e: self.session.play_view_adjustment()))
+        for name, button in self.play.items():
+            button.on_click(self.guarded(lambda _e, name=name: self.session.play(name)))
+        self.stop_script.on_click(self.guarded(lambda _e: self.session.stop_script()))
         self.pause.on_click(self.guarded(lambda _e: self._toggle_pause()))
         self.reset.on_click(self.guarded(lambda _e: self._in_background(self._reset)))
 

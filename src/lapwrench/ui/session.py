@@ -30,11 +30,12 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.robot.description import FRAME_C, FRAME_H
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError
-from lapwrench.sim.scenarios import TISSUE_DEPTH
-from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, rotate_axis
+from lapwrench.sim.scripts import TISSUE_DEPTH, park_instrument
+from lapwrench.sim.surgeon import HousingDisturbance
 from lapwrench.sim.world import CONTROL_DT
 from lapwrench.ui.history import History, mode_index
 from lapwrench.ui.inputs import HandInput, UiInputError, checked_choice, checked_number
+from lapwrench.ui.playback import PLAYABLE, ScriptPlayer, make_script
 
 DETECTORS = ("projected", "shipped")
 """Instrument detectors offered on the page: projected simulator geometry (cheap) or the shipped YOLO."""
@@ -72,14 +73,8 @@ def build_loop(cfg: Config, seed: int, detector: str) -> ClosedLoop:
         assert closed.camera is not None
         closed.camera = NoRenderCamera(closed.camera.fps)  # type: ignore[assignment]
     for i in range(closed.world.n_instruments):
-        park_instrument(closed, i)
+        park_instrument(closed.world, i)
     return closed
-
-
-def park_instrument(closed: ClosedLoop, index: int) -> None:
-    """Withdraw instrument ``index`` into its port (out of the view), as the scenarios do."""
-    w = closed.world
-    w.set_instrument_tip(index, w.port_position(index) + np.array([0.0, 0.0, -0.02]))
 
 
 def rcm_on_axis(closed: ClosedLoop) -> np.ndarray | None:
@@ -130,6 +125,8 @@ class Snapshot:
     script: bool
     pending_config: bool
     detections: tuple[tuple[tuple[float, float, float, float], tuple[float, float]], ...] = ()
+    script_name: str = ""  # the scenario playing (:data:`~lapwrench.ui.playback.PLAYABLE`), "" if none
+    script_time: float = 0.0  # s since it started
 
 
 @dataclass
@@ -137,7 +134,8 @@ class _Requests:
     config: tuple[Config, Controller] | None = None
     resume: bool = False
     disturbance: bool | None = None
-    script: bool = False
+    script: str | None = None  # a scenario to play (:data:`~lapwrench.ui.playback.PLAYABLE`)
+    stop_script: bool = False
     instruments_dirty: bool = True
     errors: list[str] = field(default_factory=list)
 
@@ -162,7 +160,7 @@ class Session:
         self.snapshot: Snapshot | None = None
         self._req = _Requests()
         self._disturbance: HousingDisturbance | None = None
-        self._script: HandGuide | None = None
+        self._script: ScriptPlayer | None = None
         self._last: TickResult | None = None
 
     # -- what the page asks -------------------------------------------------------------------
@@ -195,10 +193,17 @@ class Session:
         with self.lock:
             self._req.disturbance = bool(on)
 
-    def play_view_adjustment(self) -> None:
-        """The Fig. 4 run at the page's grip: a scripted hand turns the view 10° and lets go."""
+    def play(self, name: object) -> None:
+        """Play scenario ``name`` (:data:`~lapwrench.ui.playback.PLAYABLE`; UiInputError if unknown) from
+        the next tick, in place of one playing; the page's hand still pushes (:mod:`lapwrench.ui.playback`)."""
+        key = checked_choice(name, "scenario", tuple(PLAYABLE))
         with self.lock:
-            self._req.script = True
+            self._req.script, self._req.stop_script = key, False
+
+    def stop_script(self) -> None:
+        """Stop the scenario playing (its hand lets go, the page's instruments come back)."""
+        with self.lock:
+            self._req.script, self._req.stop_script = None, True
 
     def resume(self) -> None:
         """Leave a hold at the next tick (no-op when not held)."""
@@ -269,16 +274,22 @@ class Session:
         return res
 
     def _apply_hand(self) -> float:
+        """The page's hand on the world, plus a playing scenario's (:mod:`lapwrench.ui.playback`)."""
         w = self.closed.world
-        if self._script is not None:
-            grip = self._script.apply(w, self.closed.t, CONTROL_DT)
-            if not self._script.engaged:
-                self._script = None
-            return grip
         _, d = w.shaft_axis()
         force, torque = self.hand.wrench(d)
-        w.set_hand_wrench(force=force, torque=torque)
-        return self.hand.grip_force
+        if self._script is None:
+            w.set_hand_wrench(force=force, torque=torque)
+            return self.hand.grip_force
+        grip, finished = self._script.apply(w, self.closed.t, force, torque, self.hand.grip_force)
+        if finished:
+            self._end_script()
+        return grip
+
+    def _end_script(self) -> None:
+        """The scenario is over: only the page's hand from the next tick, and the page's instruments."""
+        self._script = None
+        self._req.instruments_dirty = True
 
     def _apply_requests(self) -> None:
         r, c = self._req, self.closed
@@ -292,12 +303,13 @@ class Session:
             if not r.disturbance:
                 c.world.set_housing_load(np.zeros(3))
             r.disturbance = None
-        if r.script:
-            _, d0 = c.world.shaft_axis()
-            target = rotate_axis(d0, [1.0, 1.0, 0.0], 10.0)
-            self._script = HandGuide(target, grip_force=self.hand.grip_force or 17.0)
-            r.script = False
-        if r.instruments_dirty or self.ticks % 100 == 0:  # the ports move with the housing
+        if (r.stop_script or r.script is not None) and self._script is not None:
+            self._end_script()
+        if r.script is not None:
+            self._script = ScriptPlayer(make_script(r.script, self.hand.grip_force), c.t)
+        r.script, r.stop_script = None, False
+        scripted = self._script is not None and self._script.script.moves_instruments  # it places them
+        if (r.instruments_dirty or self.ticks % 100 == 0) and not scripted:  # the ports move with the housing
             self._place_instruments()
             r.instruments_dirty = False
 
@@ -329,7 +341,7 @@ class Session:
             if target.visible:
                 c.world.set_instrument_tip(i, base + np.array([target.x, target.y, 0.0]))
             else:
-                park_instrument(c, i)
+                park_instrument(c.world, i)
 
     def _after(self, res: TickResult | None) -> None:
         c = self.closed
@@ -381,4 +393,6 @@ class Session:
             p_R=p_E if res is None else res.p_R.copy(), shaft_dir=d, rcm_error_mm=rcm_error * 1e3,
             disturbance=self._disturbance is not None, script=self._script is not None,
             pending_config=self._req.config is not None, detections=dets,
+            script_name="" if self._script is None else self._script.name,
+            script_time=0.0 if self._script is None else self._script.elapsed(c.t),
         )
