@@ -124,3 +124,18 @@ def test_sim_robot_estimates_the_hand_force_from_joint_torques(world: SimWorld) 
     biased = SimRobot(world, estimate=ForceEstimateConfig(torque_bias=0.5, torque_noise=0.05, seed=1))
     r2 = biased.connect()
     assert np.linalg.norm(r2.external_force - truth) > 0.1  # a torque bias shows up as a force
+
+
+def test_torque_noise_is_one_draw_per_tick_of_the_seeded_stream(world: SimWorld) -> None:
+    """The measured torques carry the seeded generator's normal draws, nv per reading in order (also
+    across the blocks drawn ahead), on top of the tick-mean torque and the bias."""
+    bias = np.linspace(-0.2, 0.2, 7)
+    robot = SimRobot(world, estimate=ForceEstimateConfig(torque_noise=0.05, torque_bias=tuple(bias), seed=3))
+    stream = np.random.default_rng(3)
+    robot.connect()
+    stream.normal(0.0, 0.05, 7)  # connect() took the first reading
+    for _ in range(1100):
+        robot.command(world.scene.q0)
+        tau = world.joint_torque_tick_mean()
+        robot.read()
+        np.testing.assert_array_equal(robot.tau_J, (tau + bias) + stream.normal(0.0, 0.05, 7))

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec
+from lapwrench.spatial import Mat, Vec, inner
 
 QP_SOLVED = 0
 QP_INFEASIBLE = 1
@@ -45,14 +45,6 @@ QP_NUMERICAL = 3  # the active normals became dependent (round-off): the caller 
 VIOLATION_TOL = 1e-12
 # n_p counts as dependent on the active normals when zᵀ n_p falls below this fraction of n_pᵀ M⁻¹ n_p.
 DEPENDENCE_TOL = 1e-10
-
-
-@kernel
-def _dot(x: Vec, y: Vec) -> float:
-    acc = 0.0
-    for i in range(x.shape[0]):
-        acc += x[i] * y[i]
-    return acc
 
 
 @kernel
@@ -115,7 +107,7 @@ def dual_active_set(
         for c in range(n):
             normals[i, c] = sign * src[c]
     for i in range(k):
-        b[i] = _dot(E[i], a0)
+        b[i] = inner(E[i], a0)
     for i in range(m):
         b[k + i] = lo[i] - widen[i]
         b[k + m + i] = -hi[i] - widen[i]
@@ -145,19 +137,19 @@ def dual_active_set(
         p, worst = -1, VIOLATION_TOL
         for i in range(k, total):
             if not is_active[i]:
-                v = (b[i] - _dot(normals[i], a)) / row_scale[i]
+                v = (b[i] - inner(normals[i], a)) / row_scale[i]
                 if v > worst:
                     p, worst = i, v
         if p < 0:
             return a, QP_SOLVED
         n_p = normals[p]
-        np_Minv_np = _dot(n_p, P[p])
+        np_Minv_np = inner(n_p, P[p])
         u_p = 0.0
         while True:  # steps on p until it joins the active set
             for i in range(q):
-                rhs[i] = _dot(P[active[i]], n_p)
+                rhs[i] = inner(P[active[i]], n_p)
                 for j in range(q):
-                    S[i, j] = _dot(normals[active[i]], P[active[j]])
+                    S[i, j] = inner(normals[active[i]], P[active[j]])
             if not cholesky_solve(S[:q, :q], rhs[:q], L, r):
                 return a, QP_NUMERICAL
             for c in range(n):
@@ -165,14 +157,14 @@ def dual_active_set(
                 for j in range(q):
                     v -= r[j] * P[active[j], c]
                 z[c] = v
-            curvature = _dot(z, n_p)
+            curvature = inner(z, n_p)
             # with n independent normals active, n_p depends on them whatever round-off says
             full = q < n and curvature > DEPENDENCE_TOL * np_Minv_np
             t1, drop = np.inf, -1
             for j in range(k, q):
                 if r[j] > 0.0 and u[j] / r[j] < t1:
                     t1, drop = u[j] / r[j], j
-            t2 = (b[p] - _dot(n_p, a)) / curvature if full else np.inf
+            t2 = (b[p] - inner(n_p, a)) / curvature if full else np.inf
             if drop < 0 and not full:
                 return a, QP_INFEASIBLE
             t = min(t1, t2)

@@ -12,12 +12,14 @@ control loop to feed the supervisor's measured-state watches.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import bind, kernel
 from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.model import RobotModel
 from lapwrench.spatial import Vec
@@ -35,7 +37,7 @@ class MeasuredScope:
 def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope:
     """RCM error and insertion depth at the robot's *measured* joints, for the controller's p_R.
 
-    One forward kinematics pass (:meth:`RobotModel.scope_axis_at`) and the formulas of
+    One forward kinematics pass (:meth:`RobotModel.scope_axis_into`) and the formulas of
     :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values
     and arrays of the wrong shape give NaN (the supervisor then holds).
     """
@@ -43,9 +45,17 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     p = np.asarray(p_R, dtype=float)
     if q.shape != (model.nq,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
-    axis = model.scope_axis_at(q)
-    e, depth = axis_rcm_error_and_depth(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))
+    axis = model.scope_axis_into(q)  # the model's own arrays, used before its next evaluation
+    e, depth = _axis_error_and_depth()(axis.p_E, axis.d_z, axis.P, np.ascontiguousarray(p), float(model.length))
     return MeasuredScope(float(e), float(depth))
+
+
+@functools.cache
+def _axis_error_and_depth() -> Callable[[Vec, Vec, Vec, Vec, float], tuple[float, float]]:
+    """:func:`axis_rcm_error_and_depth` through its entry point for C-contiguous float64 arrays
+    (:func:`lapwrench.jit.bind`, bound at the first call): no type dispatch per cycle."""
+    z = np.zeros(3)
+    return bind(axis_rcm_error_and_depth, z, z, np.zeros((3, 3)), z, 0.0)
 
 
 @kernel

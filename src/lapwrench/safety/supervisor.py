@@ -39,6 +39,7 @@ import math
 
 import numpy as np
 
+from lapwrench.jit import bind
 from lapwrench.robot.limits import JointLimits
 from lapwrench.safety.checks import MeasuredScope, command_violation, measure_scope, nearest_limit
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
@@ -73,9 +74,9 @@ class SafetySupervisor(SupervisorWatches):
         self.dt = float(dt)
         self.limits = limits
         c = self.cfg
-        self._v_max = limits.velocity * c.check_fraction
-        self._a_max = limits.acceleration * c.check_fraction
-        self._j_max = limits.jerk * c.check_fraction
+        self._v_max = np.ascontiguousarray(limits.velocity * c.check_fraction, dtype=float)
+        self._a_max = np.ascontiguousarray(limits.acceleration * c.check_fraction, dtype=float)
+        self._j_max = np.ascontiguousarray(limits.jerk * c.check_fraction, dtype=float)
         stop = limits.scaled(c.stop_fraction)
         self._stop_a = stop.acceleration
         self._stop_j = stop.jerk
@@ -85,10 +86,12 @@ class SafetySupervisor(SupervisorWatches):
         self._v = np.zeros(self.n_joints)
         self._a = np.zeros(self.n_joints)
         self._started = False
-        # load the compiled checks now, not in the first cycle
+        # The compiled checks bound to their argument types now (:func:`lapwrench.jit.bind`: no dispatch
+        # per call, nothing compiles in the first cycle); every call passes C-contiguous float64 vectors.
         z = np.zeros(self.n_joints)
-        command_violation(z, z, z, z, self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
-        nearest_limit(z, self._lo, self._hi)
+        args = (z, z, z, z, self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
+        self._command_violation = bind(command_violation, *args)
+        self._nearest_limit = bind(nearest_limit, z, self._lo, self._hi)
 
     # -- state --------------------------------------------------------------------------------
     def start(self, q0: Vec, time: float = 0.0) -> None:
@@ -128,8 +131,8 @@ class SafetySupervisor(SupervisorWatches):
         q = np.ascontiguousarray(q)
         if not math.isfinite(q.sum()):
             return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"
-        code, j, value = command_violation(
-            q, self._q, self._v, self._a, self._lo, self._hi, self.cfg.position_tolerance, self._v_max,
+        code, j, value = self._command_violation(
+            q, self._q, self._v, self._a, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
             self._a_max, self._j_max, self.dt,
         )
         if code == 0:

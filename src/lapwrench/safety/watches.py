@@ -51,8 +51,9 @@ class SupervisorWatches:
 
     def __init__(self, config: SupervisorConfig, lo: Vec, hi: Vec) -> None:
         self.cfg = config
-        self._lo = lo
-        self._hi = hi
+        self._lo = np.ascontiguousarray(lo, dtype=float)  # the compiled checks' argument type
+        self._hi = np.ascontiguousarray(hi, dtype=float)
+        self._nearest_limit = nearest_limit  # the subclass binds it to its argument types
         self.events: deque[SupervisorEvent] = deque(maxlen=config.max_events)
         self.pending: list[SupervisorEvent] = []
         self.state = SupervisorState.HOLDING
@@ -113,7 +114,7 @@ class SupervisorWatches:
         if qm.shape != self._lo.shape or not math.isfinite(qm.sum()):
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return
-        j, room = nearest_limit(qm, self._lo, self._hi)
+        j, room = self._nearest_limit(qm, self._lo, self._hi)
         if room < c.joint_stop_margin:
             if self.state is SupervisorState.RUNNING:
                 self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")
@@ -138,7 +139,8 @@ class SupervisorWatches:
                 f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
             )
         if residual is not None:
-            f = float(np.linalg.norm(np.asarray(residual, dtype=float)))
+            r = np.asarray(residual, dtype=float).ravel()
+            f = math.sqrt(r.dot(r))  # np.linalg.norm's formula for a vector, without its overhead
             over = not (f <= c.max_residual_force)
             if not over:
                 self._residual_over_since = None

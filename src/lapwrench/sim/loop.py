@@ -24,14 +24,11 @@ from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
+from lapwrench.sim.camera import NO_IMAGE, PendingFrame, SimCamera, frame_hold
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 from lapwrench.sim.scene.build import build_scene
 from lapwrench.sim.scene.config import SceneConfig
-from lapwrench.sim.sensors import (
-    SimCamera,
-    SimForceTorqueSensor,
-    TactileGripModel,
-)
+from lapwrench.sim.sensors import SimForceTorqueSensor, TactileGripModel
 from lapwrench.sim.variation import CorruptedDetector, WorldVariation
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 from lapwrench.sources import Observable, Source, simulated_input
@@ -150,7 +147,13 @@ class ClosedLoop:
 
     ``world`` varies the simulated world (:class:`~lapwrench.sim.variation.WorldVariation`): the
     trocar's stiffness, the detector's latency (unless ``detection_latency`` is given), dropout and
-    noise. The hands are the scenario's (they scale with :meth:`WorldVariation.hand`)."""
+    noise. The hands are the scenario's (they scale with :meth:`WorldVariation.hand`).
+
+    ``render_in_background`` draws the camera's frames in a child process while the loop steps on
+    (:meth:`_camera_step`): the same images, handed over with their capture times, the detector's
+    results published at the same simulated times; a frame still being drawn when a run ends is handed
+    over by :meth:`flush_frames` or :meth:`close`. It pays off when a core is free (a single run, the
+    bench), not when every core already runs a scenario."""
 
     def __init__(
         self,
@@ -163,6 +166,7 @@ class ClosedLoop:
         scene_config: SceneConfig | None = None,
         on_frame: Callable[[np.ndarray, float, str], None] | None = None,
         world: WorldVariation | None = None,
+        render_in_background: bool = False,
     ) -> None:
         self.cfg = cfg
         self.seed = seed
@@ -185,7 +189,14 @@ class ClosedLoop:
         self.supervisor = SafetySupervisor(
             self.model.limits, CONTROL_DT, SupervisorConfig.from_config(cfg, max_consecutive_misses=0)
         )
-        self.camera = SimCamera(self.world) if (camera or detector is not None or on_frame) else None
+        observers = list(_OBSERVERS)
+        self._frame_observers = [f.frame for f in observers if callable(getattr(f, "frame", None))]
+        latency_s = self.variation.detector_latency_s if detection_latency is None else detection_latency
+        # Frames drawn in a child process while the loop steps on (see _camera_step): not for a
+        # measured latency (known only once detected) nor for live telemetry (it reads the loop's state).
+        background = render_in_background and latency_s != "measured" and not self._frame_observers
+        self.camera = (SimCamera(self.world, background=background)
+                       if (camera or detector is not None or on_frame) else None)
         self.detection: SimulatedAsyncDetector | None = None
         self.detector_name = "none"
         if detector is not None:
@@ -194,15 +205,18 @@ class ClosedLoop:
             if v.detector_corrupted:
                 det = CorruptedDetector(det, v.detector_dropout, v.detector_noise_px, seed=s_det)
                 self.detector_name += v.describe_detector()
-            latency = v.detector_latency_s if detection_latency is None else detection_latency
-            self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=latency)
+            self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=latency_s)
         self.on_frame = on_frame
         self.last_mode = "idle"
         self.ft.tare()
         self.grip_force = 0.0
         self.t = 0.0
-        observers = list(_OBSERVERS)
-        self._frame_observers = [f.frame for f in observers if callable(getattr(f, "frame", None))]
+        # The image-free detector reads the world's geometry: it detects at the capture time, even
+        # when the frame is drawn in the background.
+        self._detect_at_capture = detector == "projected"
+        self._pending: PendingFrame | None = None
+        self._hold = frame_hold(self.camera.fps if self.camera else 1.0, latency_s, self._detect_at_capture
+                                 or detector is None)
         self.loop = ControlLoop(
             self.robot, self.controller, self.supervisor, self._sources(), clock=lambda: self.t,
             wall_deadlines=False, switch_interval=None,
@@ -246,15 +260,57 @@ class ClosedLoop:
                 f"capture-to-use latency {latency}{inference}")
 
     def _camera_step(self, t: float) -> None:
-        if self.camera is None or not self.camera.capture(t):
+        """The camera at ``t``: a due frame is drawn and handed to its users (the frame callback, live
+        telemetry, the detector) with its capture time and the mode at capture.
+
+        With ``render_in_background`` it is drawn in a child process while the loop steps on, and handed
+        over at the latest when it is needed: before the tick at which the detector's result on it is
+        due (capture + latency; the detector's own schedule publishes it then, as before) and before
+        the next frame. :meth:`flush_frames` hands over a frame still being drawn."""
+        cam = self.camera
+        if cam is None:
             return
-        frame = self.camera.frame
+        if self._pending is not None and t >= self._pending.deliver_by:
+            self._deliver_frame()
+        if getattr(cam, "offscreen", None) is None:  # drawn now (also a camera swapped in after construction)
+            if cam.capture(t):
+                self._publish(cam.frame, t, self.last_mode, detect=True)
+            return
+        if not cam.begin(t):
+            return
+        if self._detect_at_capture and self.detection is not None:
+            self.detection.offer(t, NO_IMAGE)  # detects from the geometry now; the frame follows
+        # handed over a tick before it is needed: the detector's result is then in its queue for anyone
+        # asking between two ticks, as when the frame is drawn at once
+        self._pending = PendingFrame(t, self.last_mode, t + self._hold - 1.5 * CONTROL_DT)
+        if self._hold < 2.5 * CONTROL_DT:  # needed within two ticks: no time to overlap
+            self._deliver_frame()
+
+    def _deliver_frame(self) -> None:
+        p, self._pending = self._pending, None
+        assert p is not None and self.camera is not None
+        self._publish(self.camera.finish(), p.t, p.mode, detect=not self._detect_at_capture)
+
+    def _publish(self, frame: np.ndarray, t: float, mode: str, *, detect: bool) -> None:
         if self.on_frame is not None:
-            self.on_frame(frame, t, self.last_mode)
+            self.on_frame(frame, t, mode)
         for observer in self._frame_observers:  # live telemetry (observe_cycles) that takes frames too
             observer(self, frame, t)
-        if self.detection is not None:
+        if detect and self.detection is not None:
             self.detection.offer(t, frame)
+
+    def flush_frames(self) -> None:
+        """Hand over the frame still being drawn in the background, if any (call at the end of a run
+        whose frames are all wanted, e.g. for a video)."""
+        if self._pending is not None:
+            self._deliver_frame()
+
+    def close(self) -> None:
+        """:meth:`flush_frames`, then end the camera's render process and free the world's renderers."""
+        self.flush_frames()
+        if isinstance(self.camera, SimCamera):
+            self.camera.close()
+        self.world.close()
 
     def _observation(self, t: float) -> InstrumentObservation | None:
         return None if self.detection is None else self.detection.observation(t)
@@ -284,6 +340,7 @@ class ClosedLoop:
             self.last_mode = c.result.mode
         self.t = t + CONTROL_DT
         if self.supervisor.alarm:
+            self.flush_frames()
             self._stop_to_rest()
             raise SafetyStopError(t, self.supervisor.alarm_reason)
         assert c.result is not None  # a failed tick raised the alarm above

@@ -8,7 +8,7 @@
 - :class:`ExternalForceObserver`: the robot's estimate of the external force on the end effector
   from the *measured* joint torques (used by :class:`lapwrench.sim.robot.SimRobot`, which adds the
   torque sensors' noise and bias). It includes the trocar force.
-- :class:`SimCamera`: laparoscope frames rendered at 25 fps.
+- the camera: :class:`~lapwrench.sim.camera.SimCamera`, in :mod:`lapwrench.sim.camera`.
 
 Every model draws from its own seeded generator, so a run is reproducible from its seed.
 
@@ -31,12 +31,13 @@ from lapwrench.sim.scene.names import FT_FORCE_SENSOR, FT_TORQUE_SENSOR
 from lapwrench.sim.world import SimWorld
 
 
-def _check_rate(rate_hz: float, name: str) -> None:
+def check_rate(rate_hz: float, name: str) -> None:
+    """ValueError unless ``rate_hz`` (a sensor's ``name``) is a positive number."""
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"{name}.rate_hz must be positive, got {rate_hz!r}")
 
 
-class _SampleAndHold:
+class SampleAndHold:
     """Emits a new sample every 1/rate seconds and holds it in between."""
 
     def __init__(self, rate_hz: float) -> None:
@@ -88,7 +89,7 @@ class SimForceTorqueSensor:
     def __init__(self, world: SimWorld, noise: ForceTorqueNoise | None = None, seed: int = 0) -> None:
         self.world = world
         self.noise = noise or ForceTorqueNoise()
-        _check_rate(self.noise.rate_hz, "ft")
+        check_rate(self.noise.rate_hz, "ft")
         m = world.model
         self._f = m.sensor(FT_FORCE_SENSOR).adr[0]
         self._m = m.sensor(FT_TORQUE_SENSOR).adr[0]
@@ -98,7 +99,7 @@ class SimForceTorqueSensor:
         z6 = np.zeros(6)
         self._ft_sample = bind(_ft_sample, self._sensordata, self._adr, z6, z6, z6, z6, z6)
         self._rng = np.random.default_rng(seed)
-        self._clock = _SampleAndHold(self.noise.rate_hz)
+        self._clock = SampleAndHold(self.noise.rate_hz)
         self._last: ForceTorqueReading | None = None
         self._bias_est = np.zeros(6)
 
@@ -149,9 +150,9 @@ class TactileGripModel:
 
     def __init__(self, model: GripModel | None = None, seed: int = 0) -> None:
         self.model = model or GripModel()
-        _check_rate(self.model.rate_hz, "tactile")
+        check_rate(self.model.rate_hz, "tactile")
         self._rng = np.random.default_rng(seed)
-        self._clock = _SampleAndHold(self.model.rate_hz)
+        self._clock = SampleAndHold(self.model.rate_hz)
         self._order = self._rng.permutation(64)  # which elements the palm covers first
         self._last: TactileReading | None = None
 
@@ -346,23 +347,3 @@ class ExternalForceObserver:
         lam2 = self.damping**2
         wrench = np.linalg.solve(J @ J.T + lam2 * np.eye(6), J @ self.r)  # [force; torque] in Pinocchio order
         return wrench[:3]
-
-
-class SimCamera:
-    """Laparoscope frames at ``fps`` (default 25), rendered headless without shadows."""
-
-    def __init__(self, world: SimWorld, fps: float = 25.0) -> None:
-        _check_rate(fps, "camera")
-        self.fps = fps
-        self.world = world
-        self._clock = _SampleAndHold(fps)
-        self.frame: np.ndarray | None = None
-        self.stamp = -np.inf
-
-    def capture(self, t: float) -> bool:
-        """Render a new frame if one is due at ``t``; returns True when it did."""
-        if self._clock.due(t):
-            self.frame = self.world.render()
-            self.stamp = t
-            return True
-        return False

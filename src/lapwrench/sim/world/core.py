@@ -16,6 +16,7 @@ import numpy as np
 from lapwrench.jit import bind
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
 from lapwrench.robot.limits import joint_torque_limits
+from lapwrench.sim.offscreen import scope_view_option
 from lapwrench.sim.scene.build import Scene, build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.scene.names import (
@@ -121,8 +122,7 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         self._tip_sites = [m.site(s).id for s in INSTRUMENT_TIP_SITES]
         self._cam = m.camera(CAMERA_NAME).id
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
-        self._scope_vopt = mujoco.MjvOption()
-        self._scope_vopt.geomgroup[1] = 0
+        self._scope_vopt = scope_view_option()
         self._warn_idx = np.array(
             [
                 int(mujoco.mjtWarning.mjWARN_BADQACC),

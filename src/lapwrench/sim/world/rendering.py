@@ -9,6 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from lapwrench.sim.offscreen import make_renderer
 from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.scene.names import CAMERA_NAME
 
@@ -21,6 +22,8 @@ class WorldRendering:
     data: mujoco.MjData
     _renderers: dict[tuple[int, int], mujoco.Renderer]
     _scope_vopt: mujoco.MjvOption
+    _fwd_valid: bool
+    _fwd: np.ndarray
 
     def close(self) -> None:
         """Free the renderers (GL contexts)."""
@@ -36,11 +39,20 @@ class WorldRendering:
         key = (w, h)
         r = self._renderers.get(key)
         if r is None:
-            r = mujoco.Renderer(self.model, height=h, width=w)
-            r.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
-            r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
-            r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
-            self._renderers[key] = r
-        # The arm (geom group 1) is never in the laparoscope's view: skip drawing it there.
+            r = self._renderers[key] = make_renderer(self.model, w, h)
         r.update_scene(self.data, camera=camera, scene_option=self._scope_vopt if camera == CAMERA_NAME else None)
         return r.render()
+
+    def render_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Copies of (qpos, mocap_pos, mocap_quat) at the last ``mj_forward``: the state :meth:`render`
+        draws (its poses are that forward's, whatever was set since), from which a renderer of its own
+        draws the same image (:mod:`lapwrench.sim.offscreen`). None while no forward is known to
+        hold (inside a tick, or after a failed one)."""
+        if not self._fwd_valid:
+            return None
+        m, fwd = self.model, self._fwd
+        nq, nv, nm = m.nq, m.nv, m.nmocap
+        k = nq + nv
+        return (fwd[:nq].copy(), fwd[k : k + 3 * nm].reshape(nm, 3).copy(),
+                fwd[k + 3 * nm : k + 7 * nm].reshape(nm, 4).copy())
+
