@@ -169,6 +169,7 @@ def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> Scenari
             if opts.progress and round(loop.t * 1000) % 100 == 0:
                 opts.progress(0.1)
     finally:
+        loop.flush_frames()  # a frame drawn in the background (render_in_background) reaches the video
         if writer is not None:
             writer.close()
     m = run_metrics(loop, trace, time.perf_counter() - t0, script.track_index)

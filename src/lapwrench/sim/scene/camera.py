@@ -74,6 +74,11 @@ def configure_rendering(spec: mujoco.MjSpec, cam: CameraIntrinsics, incision: np
     vis.global_.offwidth = max(1280, cam.width)
     vis.global_.offheight = max(960, cam.height)
     vis.quality.shadowsize = 0
+    # No multisampling: on llvmpipe (software GL, this project's headless default) 4x MSAA doubles the
+    # cost of a 640x480 frame (65 -> 33 ms in one interleaved run under load), and the shipped detector
+    # scores the same on frames drawn without it (bench/detect.py, 200 freshly rendered test images:
+    # mAP50 0.963 with 4x, 0.963 without; recall 0.931 / 0.928, one box of 306).
+    vis.quality.offsamples = 0
     vis.headlight.ambient = [0.25, 0.25, 0.25]
     vis.headlight.diffuse = [0.45, 0.45, 0.45]
     vis.headlight.specular = [0.1, 0.1, 0.1]
