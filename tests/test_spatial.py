@@ -6,7 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lapwrench.spatial import Wrench, cholesky_inverse, cross3, inner, lu_solve, matvec, skew, wrench_transform
+from lapwrench.spatial import (
+    Wrench,
+    cholesky_factor,
+    cholesky_inverse,
+    cross3,
+    inner,
+    lu_solve,
+    matvec,
+    skew,
+    wrench_transform,
+)
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -68,9 +78,29 @@ def test_lu_solve_solves_with_pivoting(n: int) -> None:
     rng = np.random.default_rng(10 + n)
     for _ in range(5):
         A, b = rng.standard_normal((n, n)), rng.standard_normal(n)
-        np.testing.assert_allclose(lu_solve(A, b), np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
+        x, ok = lu_solve(A, b)
+        assert ok
+        np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
     P = np.array([[0.0, 1.0], [1.0, 0.0]])  # a zero first pivot: needs the row exchange
-    np.testing.assert_allclose(lu_solve(P, np.array([2.0, 3.0])), [3.0, 2.0])
+    x, ok = lu_solve(P, np.array([2.0, 3.0]))
+    assert ok
+    np.testing.assert_allclose(x, [3.0, 2.0])
+
+
+def test_lu_solve_reports_a_singular_system_with_nans() -> None:
+    x, ok = lu_solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.array([1.0, 1.0]))
+    assert not ok and np.isnan(x).all()
+
+
+def test_cholesky_factor_writes_l_into_a_larger_workspace_and_honours_its_tolerance() -> None:
+    A = np.array([[4.0, 2.0], [2.0, 3.0]])
+    L = np.full((3, 3), 7.0)
+    assert cholesky_factor(A, L, 0.0)
+    np.testing.assert_allclose(np.tril(L[:2, :2]) @ np.tril(L[:2, :2]).T, A, rtol=1e-14)
+    assert L[2, 2] == 7.0  # outside the q x q block: untouched
+    nearly_singular = np.array([[1.0, 1.0], [1.0, 1.0 + 1e-15]])
+    assert cholesky_factor(nearly_singular, np.zeros((2, 2)), 0.0)
+    assert not cholesky_factor(nearly_singular, np.zeros((2, 2)), 1e-14)
 
 
 def test_matvec_inner_and_cross3_are_numpys() -> None:

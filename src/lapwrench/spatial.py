@@ -83,26 +83,40 @@ def inner(a: Vec, b: Vec) -> float:
 
 
 @kernel
-def cholesky_inverse(A: Mat) -> tuple[Mat, bool]:
-    """A⁻¹ of a symmetric positive definite A (its lower triangle is read) through A = L Lᵀ, A⁻¹ = L⁻ᵀ L⁻¹.
+def cholesky_factor(A: Mat, L: Mat, rel_tol: float) -> bool:
+    """A = L Lᵀ for a symmetric positive definite A (q x q, its lower triangle is read), L written into
+    the top-left q x q of ``L`` (lower triangle; a workspace at least that large).
 
-    Returns (A⁻¹, True), or (zeros, False) when a pivot is not positive: A is not numerically
-    positive definite (singular, or not a number). The result is exactly symmetric.
+    False when a pivot is not above ``rel_tol`` x max(1, |A_jj|): A is not (numerically) positive
+    definite, singular, or not a number.
     """
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
+    q = A.shape[0]
+    for j in range(q):
         d = A[j, j]
         for c in range(j):
             d -= L[j, c] * L[j, c]
-        if not d > 0.0:
-            return np.zeros((n, n)), False
+        if not d > rel_tol * max(1.0, abs(A[j, j])):
+            return False
         L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
+        for i in range(j + 1, q):
             v = A[i, j]
             for c in range(j):
                 v -= L[i, c] * L[j, c]
             L[i, j] = v / L[j, j]
+    return True
+
+
+@kernel
+def cholesky_inverse(A: Mat) -> tuple[Mat, bool]:
+    """A⁻¹ of a symmetric positive definite A (its lower triangle is read) through A = L Lᵀ, A⁻¹ = L⁻ᵀ L⁻¹.
+
+    Returns (A⁻¹, True), or (zeros, False) when a pivot is not positive (:func:`cholesky_factor`).
+    The result is exactly symmetric.
+    """
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    if not cholesky_factor(A, L, 0.0):
+        return np.zeros((n, n)), False
     X = np.zeros((n, n))  # L⁻¹, lower triangular
     for j in range(n):
         X[j, j] = 1.0 / L[j, j]
@@ -123,11 +137,10 @@ def cholesky_inverse(A: Mat) -> tuple[Mat, bool]:
 
 
 @kernel
-def lu_solve(A: Mat, b: Vec) -> Vec:
+def lu_solve(A: Mat, b: Vec) -> tuple[Vec, bool]:
     """x with A x = b, by Gaussian elimination with partial pivoting (what LAPACK's gesv does).
 
-    A singular A raises ZeroDivisionError compiled (numba's Python error model), as
-    ``np.linalg.solve`` raises; interpreted, it gives non-finite values.
+    Returns (x, True), or (NaNs, False) when a pivot is exactly zero (A singular).
     """
     n = A.shape[0]
     U = A.copy()
@@ -137,6 +150,8 @@ def lu_solve(A: Mat, b: Vec) -> Vec:
         for i in range(k + 1, n):
             if abs(U[i, k]) > abs(U[p, k]):
                 p = i
+        if U[p, k] == 0.0:
+            return np.full(n, np.nan), False
         if p != k:
             for c in range(k, n):
                 U[k, c], U[p, c] = U[p, c], U[k, c]
@@ -151,7 +166,7 @@ def lu_solve(A: Mat, b: Vec) -> Vec:
         for c in range(i + 1, n):
             v -= U[i, c] * x[c]
         x[i] = v / U[i, i]
-    return x
+    return x, True
 
 
 @dataclass(frozen=True)

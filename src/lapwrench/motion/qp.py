@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec, inner
+from lapwrench.spatial import Mat, Vec, cholesky_factor, inner
 
 QP_SOLVED = 0
 QP_INFEASIBLE = 1
@@ -52,18 +52,8 @@ def cholesky_solve(S: Mat, rhs: Vec, L: Mat, x: Vec) -> bool:
     """Solve S x = rhs in place for a symmetric positive definite S (q x q) by Cholesky, with ``L``
     (at least q x q) as workspace; False if S is not positive definite."""
     q = S.shape[0]
-    for j in range(q):
-        d = S[j, j]
-        for c in range(j):
-            d -= L[j, c] * L[j, c]
-        if not d > 1e-14 * max(1.0, abs(S[j, j])):
-            return False
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, q):
-            v = S[i, j]
-            for c in range(j):
-                v -= L[i, c] * L[j, c]
-            L[i, j] = v / L[j, j]
+    if not cholesky_factor(S, L, 1e-14):
+        return False
     for i in range(q):  # L y = rhs, y stored in x
         v = rhs[i]
         for c in range(i):

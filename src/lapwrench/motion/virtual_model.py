@@ -91,9 +91,9 @@ def euler_velocity_step(
 
     ``tau`` is the full fused torque evaluated at the current θ̇ (it already contains -B θ̇);
     ``damping`` is B, the Jacobian of -τ with respect to θ̇. The n x n system is solved by
-    :func:`~lapwrench.spatial.lu_solve` (partial pivoting, as LAPACK's, without its call cost).
+    :func:`~lapwrench.spatial.lu_solve` (partial pivoting, as LAPACK's, without its call cost); a
+    singular system gives NaNs, which the tick treats as a non-finite demand (it brakes).
     """
     rhs = dt * (tau - (kin.nle - kin.gravity))
-    if integrator == "explicit":
-        return kin.dq + lu_solve(kin.M, rhs)
-    return kin.dq + lu_solve(kin.M + dt * damping, rhs)
+    step, _ = lu_solve(kin.M if integrator == "explicit" else kin.M + dt * damping, rhs)
+    return kin.dq + step

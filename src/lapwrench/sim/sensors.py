@@ -29,6 +29,7 @@ from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import ForceTorqueReading, TactileReading
 from lapwrench.sim.scene.names import FT_FORCE_SENSOR, FT_TORQUE_SENSOR
 from lapwrench.sim.world import SimWorld
+from lapwrench.spatial import lu_solve
 
 
 def check_rate(rate_hz: float, name: str) -> None:
@@ -230,29 +231,9 @@ def _observer_step(
         for j in range(n):
             s += J[i, j] * r_new[j]
         b[i] = s
-    # Gaussian elimination with partial pivoting (LAPACK gesv's method), then back substitution.
-    for c in range(m):
-        piv = c
-        for i in range(c + 1, m):
-            if abs(A[i, c]) > abs(A[piv, c]):
-                piv = i
-        if A[piv, c] == 0.0:
-            return False
-        if piv != c:
-            for k in range(m):
-                A[c, k], A[piv, k] = A[piv, k], A[c, k]
-            b[c], b[piv] = b[piv], b[c]
-        for i in range(c + 1, m):
-            f = A[i, c] / A[c, c]
-            for k in range(c + 1, m):
-                A[i, k] -= f * A[c, k]
-            b[i] -= f * b[c]
-    x = np.empty(m)
-    for i in range(m - 1, -1, -1):
-        s = b[i]
-        for k in range(i + 1, m):
-            s -= A[i, k] * x[k]
-        x[i] = s / A[i, i]
+    x, ok = lu_solve(A, b)  # partial pivoting, LAPACK gesv's method
+    if not ok:
+        return False
     for i in range(force.size):
         force[i] = x[i]
     return True
