@@ -14,17 +14,19 @@ those cues evaluated on the tick's geometry in between. Both give a :class:`Stag
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
+from lapwrench.allocation import nullspace_wrench
 from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import NO_AXIS, MeasuredFeedback
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState, residual_force
 from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
 from lapwrench.sensors import ValidInputs
-from lapwrench.spatial import Mat, Vec, Wrench, wrench_transform
+from lapwrench.spatial import Mat, Vec, Wrench
 from lapwrench.tick_core import SaturationInputs, geometry_stage, motion_tail, tick_stage
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
@@ -96,6 +98,7 @@ class CompiledTick:
         self.cues = list(cues)
         self.null_cues = [c for c in self.cues if c.priority == "null"]
         self.task_cues = [c for c in self.cues if c.priority == "task"]
+        self.cues_in_order = self.null_cues + self.task_cues  # the order of the rows of the stacked wrenches
         self.sat = SaturationInputs.allocate(params.q_lo.shape[0])
 
     # -- arguments of fixed types --------------------------------------------------------------
@@ -152,7 +155,10 @@ class CompiledTick:
             args = self._tick_args(terms, none, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
-            kin = assemble_kinematics(*terms)
+            self._assemble = bind(assemble_kinematics, *terms)
+            kin = self._assemble(*terms)
+            one = np.zeros((1, 6)), np.zeros((1, 3)), np.zeros(3)
+            self._about_p_G = bind(nullspace_wrench, *one)  # eq (39) for one wrench: the eq (38) sum of one
             g_args = self._geometry_args(kin, None, NO_AXIS, False)
             self._geometry_stage = bind(geometry_stage, *g_args)
             geo, _ = self._geometry_stage(*g_args)
@@ -196,7 +202,7 @@ class CompiledTick:
         may_admit: bool,
     ) -> StageResult:
         measured, has_measured = self.feedback.measured_axis(None if inputs.robot is None else inputs.robot.q)
-        kin = assemble_kinematics(*terms)
+        kin = self._assemble(*terms)
         robot, ft = inputs.robot, inputs.ft
         residual = None
         if ft is not None and robot is not None and robot.external_force is not None:
@@ -209,9 +215,9 @@ class CompiledTick:
         W_r, W_h, W_c, W_f, W_n = W
         q, dq, ddq, tau = ref
         wrenches = {**self._paper_wrenches(W_r, W_h, W_c, W_f), **extra.by_name}
-        return StageResult(geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, W_n, tau, delta, contacts,
-                           non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped, at,
-                           extra.telemetry, extra.faults)
+        return StageResult._make((geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, W_n, tau, delta, contacts,
+                                  non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped,
+                                  at, extra.telemetry, extra.faults))
 
     def _evaluate_cues(self, ctx: TickContext) -> _Extra:
         """The Python cues this tick: the null-space wrenches with their points and summed damping, the
@@ -234,14 +240,20 @@ class CompiledTick:
         task_F = np.zeros(3)
         for w in task:  # a task-space cue acts at p_R through J_R: its force (its moment is not used)
             task_F += w.force
-        wrenches = list(zip(self.null_cues + self.task_cues, null + task, strict=True))
+        checked = null + task
+        # every wrench [moment; force] a row, every point a row (null-space cues first): one copy each
+        W = np.concatenate([a for w in checked for a in (w.moment, w.force)]).reshape(-1, 6)
+        points = np.concatenate([w.point for w in checked]).reshape(-1, 3)
+        n = len(null)
+        about = self._about_p_G
         return _Extra(
-            _f64(np.array([w.vector for w in null]).reshape(-1, 6)),
-            _f64(np.array([w.point for w in null], dtype=float).reshape(-1, 3)),
+            W[:n],
+            points[:n],
             D,
             task_F,
-            {c.name: wrench_transform(w.point, p_G) @ w.vector for c, w in wrenches},
-            {c.name: _checked_telemetry(c, c.telemetry(ctx, w)) for c, w in wrenches if c.telemetry_fields},
+            {c.name: about(W[i:i + 1], points[i:i + 1], p_G) for i, c in enumerate(self.cues_in_order)},
+            {c.name: _checked_telemetry(c, c.telemetry(ctx, w))
+             for c, w in zip(self.cues_in_order, checked, strict=True) if c.telemetry_fields},
             tuple(faults),
         )
 
@@ -251,6 +263,8 @@ class CueError(RuntimeError):
 
 
 def _vec3(x: object) -> Vec | None:
+    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (3,):
+        return x  # the common case, checked cheaply
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError):
@@ -265,9 +279,11 @@ def _checked_wrench(cue: Cue, w: object, p_G: Vec, faults: list[str]) -> Wrench:
     moment, force, point = _vec3(w.moment), _vec3(w.force), _vec3(w.point)
     if moment is None or force is None or point is None:
         raise CueError(f"cue {cue.name!r} returned a Wrench whose moment, force and point are not 3-vectors")
-    if not (np.isfinite(moment).all() and np.isfinite(force).all() and np.isfinite(point).all()):
+    if not all(map(math.isfinite, [*moment.tolist(), *force.tolist(), *point.tolist()])):  # one pass, no ufuncs
         faults.append(f"cue {cue.name!r}: non-finite wrench; dropped this tick")
         return Wrench.zero(p_G)
+    if moment is w.moment and force is w.force and point is w.point:
+        return w  # already float64 3-vectors: as it is
     return Wrench(moment, force, point)
 
 
@@ -286,7 +302,7 @@ def _checked_damping(cue: Cue, D: object, faults: list[str]) -> Mat:
 
 def _checked_telemetry(cue: Cue, values: object) -> tuple[float, ...]:
     try:
-        out = tuple(float(x) for x in values)  # type: ignore[union-attr]
+        out = tuple(map(float, values))  # type: ignore[call-overload]
     except (TypeError, ValueError) as exc:
         raise CueError(f"cue {cue.name!r}: telemetry must be numbers ({exc})") from exc
     if len(out) != len(cue.telemetry_fields):

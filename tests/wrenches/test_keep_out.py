@@ -88,6 +88,18 @@ def test_in_the_margin_the_tip_is_pushed_out_along_the_normal() -> None:
     assert cue.telemetry(ctx, w) == (pytest.approx(0.005), pytest.approx(50.0))
 
 
+def test_each_tick_sees_its_own_tip() -> None:
+    """One cue, the tip moving in and out of the layer: wrench, damping and telemetry follow each context."""
+    cue = _cue(**SPHERE)
+    near = _context(np.array([0.485, 0.0, 0.2]), dq=np.ones(N))  # 5 mm from the sphere, margin 10
+    far = _context(np.array([0.5, 0.0, 0.2]), dq=np.ones(N))  # 20 mm
+    for ctx, d in ((near, 0.005), (far, 0.02), (near, 0.005), (far, 0.02)):
+        w = cue.compute(ctx)
+        assert bool(np.any(w.vector)) is (d < 0.01)
+        assert (cue.damping_matrix(ctx) is not None) is (d < 0.01)
+        assert cue.telemetry(ctx, w)[0] == pytest.approx(d)
+
+
 def test_inside_the_zone_the_push_is_capped_and_still_outward() -> None:
     cue = _cue(**SPHERE)
     p_C = np.array([0.45, 0.0, 0.185])  # 15 mm below the centre: inside

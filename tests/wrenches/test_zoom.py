@@ -53,6 +53,12 @@ def test_spread_is_the_widest_pair_over_the_image_diagonal() -> None:
     assert instrument_spread(pts[:2], 640, 480) == pytest.approx(50.0 / DIAG)
 
 
+def test_spread_of_many_instruments_is_the_widest_of_all_pairs() -> None:
+    pts = np.random.default_rng(3).uniform(0.0, 480.0, size=(6, 2))
+    widest = max(float(np.linalg.norm(a - b)) for a in pts for b in pts)
+    assert instrument_spread(pts, 640, 480) == pytest.approx(widest / DIAG, rel=1e-12)
+
+
 @pytest.mark.parametrize("n", [0, 1])
 def test_no_spread_with_fewer_than_two_instruments(n: int) -> None:
     assert math.isnan(instrument_spread(np.zeros((n, 2)), 640, 480))

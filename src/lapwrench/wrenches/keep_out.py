@@ -29,7 +29,7 @@ from typing import Literal
 import numpy as np
 
 from lapwrench.config_ranges import ConfigError, ranged
-from lapwrench.spatial import Mat, Vec, Wrench, skew
+from lapwrench.spatial import Mat, Vec, Wrench, cross3, skew
 from lapwrench.wrenches.base import Cue, TickContext
 
 
@@ -104,6 +104,7 @@ class KeepOutCue(Cue):
         p = params
         self._a = np.asarray(p.center if p.shape == "sphere" else p.point, dtype=float)
         self._normal = np.asarray(p.normal, dtype=float)
+        self._last: tuple[TickContext | None, float, Vec, Mat | None] = (None, math.inf, self._normal, None)
 
     def distance(self, p: Vec) -> tuple[float, Vec]:
         """Signed distance of ``p`` to the zone (m, positive outside) and the outward normal."""
@@ -111,25 +112,33 @@ class KeepOutCue(Cue):
             return sphere_distance(p, self._a, self.params.radius)
         return plane_distance(p, self._a, self._normal)
 
+    def _tick(self, ctx: TickContext) -> tuple[float, Vec, Mat | None]:
+        """The tip's distance and outward normal (:meth:`distance`) and the damping matrix (None outside
+        the layer or without damping), computed once a tick: ``compute``, ``damping_matrix`` and
+        ``telemetry`` all see the tick's same context."""
+        last, d, n, D = self._last
+        if last is not ctx:
+            d, n = self.distance(ctx.kin.p_C)
+            D = (None if d >= self.params.margin or self.params.damping == 0.0 else
+                 normal_damping_matrix(n, self.params.damping, tip_velocity_map(ctx.kin.p_C, ctx.geometry.p_G)))
+            self._last = (ctx, d, n, D)
+        return d, n, D
+
     def damping_matrix(self, ctx: TickContext) -> Mat | None:
-        d, n = self.distance(ctx.kin.p_C)
-        if d >= self.params.margin or self.params.damping == 0.0:
-            return None
-        return normal_damping_matrix(n, self.params.damping, tip_velocity_map(ctx.kin.p_C, ctx.geometry.p_G))
+        return self._tick(ctx)[2]
 
     def compute(self, ctx: TickContext) -> Wrench:
         p_C, p_G = ctx.kin.p_C, ctx.geometry.p_G
-        d, n = self.distance(p_C)
+        d, n, D = self._tick(ctx)
         if d >= self.params.margin:
             return Wrench.zero(p_G)
         spring = barrier_force(d, self.params.margin, self.params.stiffness, self.params.F_max)
         W = np.zeros(6)
-        W[:3], W[3:] = np.cross(p_C - p_G, spring * n), spring * n  # the barrier at p_C, about p_G (eq 39)
-        D = self.damping_matrix(ctx)
+        W[:3], W[3:] = cross3(p_C - p_G, spring * n), spring * n  # the barrier at p_C, about p_G (eq 39)
         if D is not None:
             W -= D @ (ctx.geometry.J_G @ ctx.kin.dq)
         return Wrench(W[:3], W[3:], p_G)
 
     def telemetry(self, ctx: TickContext, wrench: Wrench) -> tuple[float, ...]:
-        d, _ = self.distance(ctx.kin.p_C)
+        d = self._tick(ctx)[0]
         return d, barrier_force(d, self.params.margin, self.params.stiffness, self.params.F_max)

@@ -47,11 +47,12 @@ class ZoomParams:
 def instrument_spread(points: Vec, width: float, height: float) -> float:
     """s = max_{i<j} ‖(u_i, v_i) - (u_j, v_j)‖ / √(width² + height²): the widest pair of detected
     instruments as a share of the image diagonal; NaN with fewer than two points."""
-    n = points.shape[0]
-    if n < 2:
+    if points.shape[0] < 2:
         return math.nan
-    diff = points[:, None, :] - points[None, :, :]
-    return float(np.sqrt((diff**2).sum(axis=2)).max()) / math.hypot(width, height)
+    uv = points.tolist()  # a few detections: pairs of Python floats beat array broadcasting at 1 kHz
+    widest = max(math.sqrt((u1 - u2) * (u1 - u2) + (v1 - v2) * (v1 - v2))
+                 for i, (u1, v1) in enumerate(uv) for u2, v2 in uv[i + 1:])
+    return widest / math.hypot(width, height)
 
 
 def in_band(s: float, band: tuple[float, float]) -> bool:
@@ -85,6 +86,8 @@ class ZoomCue(Cue):
     def __init__(self, name: str, params: ZoomParams, cfg: Config) -> None:
         super().__init__(name, params, cfg)
         self._size = (float(cfg.camera.width), float(cfg.camera.height))
+        self._last: tuple[TickContext | None, float] = (None, math.nan)  # this tick's spread, for telemetry
+
 
     def spread(self, ctx: TickContext) -> float:
         """The instruments' spread this tick (NaN without at least two detections)."""
@@ -92,11 +95,19 @@ class ZoomCue(Cue):
         return math.nan if obs is None else instrument_spread(np.asarray(obs.points, float).reshape(-1, 2),
                                                               *self._size)
 
+    def _tick_spread(self, ctx: TickContext) -> float:
+        """:meth:`spread`, computed once a tick (``compute`` and ``telemetry`` see the same context)."""
+        last, s = self._last
+        if last is not ctx:
+            s = self.spread(ctx)
+            self._last = (ctx, s)
+        return s
+
     def compute(self, ctx: TickContext) -> Wrench:
-        F = zoom_force(self.spread(ctx), self.params)
+        F = zoom_force(self._tick_spread(ctx), self.params)
         return Wrench(np.zeros(3), F * ctx.kin.d_z, ctx.kin.p_C)
 
     def telemetry(self, ctx: TickContext, wrench: Wrench) -> tuple[float, ...]:
-        s = self.spread(ctx)
+        s = self._tick_spread(ctx)
         band = math.nan if math.isnan(s) else float(in_band(s, self.params.band))
         return s, band, float(wrench.force @ ctx.kin.d_z)
