@@ -122,20 +122,27 @@ def parse_cues(data: Any) -> tuple[CueEntry, ...]:
 
 
 def telemetry_fields(cls: Any, key: str, kind: str) -> tuple[str, ...]:
-    """The ``telemetry_fields`` of cue class ``cls`` (configured at ``key``), checked: at most
-    :data:`MAX_CUE_TELEMETRY` distinct lower-case names (each becomes a field of the log's cycle
-    message and a column of the traces), else a :class:`ConfigError`."""
+    """The ``telemetry_fields`` of cue class ``cls`` (configured at ``key``), checked by
+    :func:`telemetry_fields_problem`, else a :class:`ConfigError`."""
     fields = getattr(cls, "telemetry_fields", ())
-    if not isinstance(fields, tuple | list) or not all(isinstance(f, str) and plugins.NAME.match(f) for f in fields):
-        raise ConfigError(f"config key '{key}': cue '{kind}' has telemetry_fields {short(fields)}; they must be a "
-                          "tuple of lower-case names (a-z, 0-9, _; at most 40 characters)", key)
-    if len(set(fields)) != len(fields):
-        raise ConfigError(f"config key '{key}': cue '{kind}' names a telemetry field twice: {short(tuple(fields))}",
-                          key)
-    if len(fields) > MAX_CUE_TELEMETRY:
-        raise ConfigError(f"config key '{key}': cue '{kind}' declares {len(fields)} telemetry fields; a cue logs at "
-                          f"most {MAX_CUE_TELEMETRY}", key)
+    problem = telemetry_fields_problem(fields)
+    if problem:
+        raise ConfigError(f"config key '{key}': cue '{kind}' {problem}", key)
     return tuple(fields)
+
+
+def telemetry_fields_problem(fields: object) -> str:
+    """What is wrong with a cue's telemetry field names ("" when nothing): they must be at most
+    :data:`MAX_CUE_TELEMETRY` distinct lower-case names (each becomes a field of the log's cycle message
+    and a column of the traces). The configuration and a log layout given in code both check with it."""
+    if not isinstance(fields, tuple | list) or not all(isinstance(f, str) and plugins.NAME.match(f) for f in fields):
+        return (f"has telemetry_fields {short(fields)}; they must be a tuple of lower-case names (a-z, 0-9, _; "
+                "at most 40 characters)")
+    if len(set(fields)) != len(fields):
+        return f"names a telemetry field twice: {short(tuple(fields))}"
+    if len(fields) > MAX_CUE_TELEMETRY:
+        return f"declares {len(fields)} telemetry fields; a cue logs at most {MAX_CUE_TELEMETRY}"
+    return ""
 
 
 def cues_to_dict(entries: tuple[CueEntry, ...]) -> dict[str, Any]:

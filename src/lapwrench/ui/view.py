@@ -44,6 +44,7 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
     os.environ.setdefault("LP_NUM_THREADS", "1")
     import mujoco
 
+    from lapwrench.sim.offscreen import make_renderer, scope_view_option
     from lapwrench.sim.scene.build import build_scene
     from lapwrench.sim.scene.config import SceneConfig
 
@@ -51,11 +52,8 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
     model = build_scene(SceneConfig.from_config(cfg)).model
     data = mujoco.MjData(model)
     width, height = view_size(cfg, scale)
-    renderer = mujoco.Renderer(model, height=height, width=width)
-    for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION, mujoco.mjtRndFlag.mjRND_SKYBOX):
-        renderer.scene.flags[flag] = False
-    option = mujoco.MjvOption()
-    option.geomgroup[1] = 0  # the arm is never in the laparoscope's view
+    renderer = make_renderer(model, width, height)  # set up as the simulation's laparoscope frames are
+    option = scope_view_option()  # the arm is never in the laparoscope's view
     conn.send("ready")
     try:
         while (msg := conn.recv()) is not None:

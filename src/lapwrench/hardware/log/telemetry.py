@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from lapwrench import plugins
-from lapwrench.config_cues import MAX_CUE_TELEMETRY, MAX_TELEMETRY, CueEntry, parse_cues
+from lapwrench.config_cues import MAX_TELEMETRY, CueEntry, parse_cues, telemetry_fields_problem
 from lapwrench.config_ranges import ConfigError
 
 if TYPE_CHECKING:
@@ -41,12 +41,11 @@ def checked_layout(telemetry: Mapping[str, Sequence[str]] | Iterable[tuple[str, 
     if len(set(names)) != len(names):
         raise ValueError(f"cue telemetry: a cue is named twice in {names}")
     for cue, fields in layout:
-        bad = [n for n in (cue, *fields) if not plugins.NAME.match(n)]
-        if bad:
-            raise ValueError(f"cue telemetry of {cue!r}: {bad[0]!r} is not a lower-case name (a-z, 0-9, _)")
-        if len(set(fields)) != len(fields) or len(fields) > MAX_CUE_TELEMETRY:
-            raise ValueError(f"cue telemetry of {cue!r}: {len(fields)} fields {fields}; at most "
-                             f"{MAX_CUE_TELEMETRY} distinct ones a cue")
+        if not plugins.NAME.match(cue):
+            raise ValueError(f"cue telemetry: {cue!r} is not a lower-case name (a-z, 0-9, _)")
+        problem = telemetry_fields_problem(fields)
+        if problem:
+            raise ValueError(f"cue telemetry of {cue!r}: {problem}")
     total = sum(len(f) for _, f in layout)
     if total > MAX_TELEMETRY:
         raise ValueError(f"cue telemetry: {total} fields in all; at most {MAX_TELEMETRY} are logged")
