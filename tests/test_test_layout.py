@@ -23,15 +23,9 @@ UNTESTED: dict[str, str] = {
     "hardware/rt/child.py": "the child process's main: tests/hardware/test_rt_process.py",
     "hardware/rt/factories.py": "robot factories of the child: tests/hardware/test_rt_process.py",
     "hardware/rt/parent.py": "RtProcess: tests/hardware/test_rt_process.py",
-    # simulation pieces exercised through the world, the scenarios and the demo
-    "sim/report.py": "the demo report: tests/sim/test_demo.py",
-    "sim/video.py": "the demo video: tests/sim/test_demo.py",
-    "sim/world/errors.py": "one exception class",
     # perception pieces exercised through the detectors and the CLI
     "perception/train.py": "training needs the training venv (torch, ultralytics)",
     # the rest
-    "safety/config.py": "the supervisor's config: tests/safety/test_supervisor.py",
-    "safety/watches.py": "the supervisor's watches: tests/safety/test_supervisor.py",
     "tick_core.py": "the compiled tick: tests/test_compiled_tick.py, tests/test_controller.py",
 }
 

@@ -353,8 +353,22 @@ def write_metrics(out: Path, results: dict[str, ScenarioResult], meta: dict) -> 
             "instrument_source": res.instrument_source,
         }
     path = out / "metrics.json"
-    path.write_text(json.dumps(data, indent=2, default=_json_default))
+    path.write_text(json.dumps(_finite(data), indent=2, default=_json_default))
     return path
+
+
+def _finite(o: object) -> object:
+    """``o`` with every NaN or infinite number as None: JSON (RFC 8259) has no NaN, and strict readers
+    (jq, browsers) refuse a file that holds one."""
+    if isinstance(o, float | np.floating):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.ndarray):
+        return _finite(o.tolist())
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_finite(v) for v in o]
+    return o
 
 
 def _json_default(o: object) -> object:

@@ -6,6 +6,7 @@ strip annotates frames the same way).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,9 @@ from lapwrench.config import Config
 def annotate_frame(frame: np.ndarray, cfg: Config, label: str) -> np.ndarray:
     import cv2
 
+    if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3):
+        got = f"{frame.dtype} {frame.shape}" if isinstance(frame, np.ndarray) else type(frame).__name__
+        raise ValueError(f"video frame must be an 8-bit image (uint8, H x W or H x W x C), got {got}")
     img = np.ascontiguousarray(frame.copy())
     c = (round(cfg.camera.u0), round(cfg.camera.v0))
     cv2.circle(img, c, int(cfg.tracking.epsilon1), (255, 255, 255), 1, cv2.LINE_AA)
@@ -30,6 +34,8 @@ class VideoWriter:
     def __init__(self, path: Path, cfg: Config, fps: float = 25.0) -> None:
         import imageio.v2 as imageio
 
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not (math.isfinite(fps) and fps > 0):
+            raise ValueError(f"video fps must be a positive number, got {fps!r}")
         self.path = path
         self.cfg = cfg
         self._w = imageio.get_writer(path, fps=fps, codec="libx264", quality=6, macro_block_size=16)
