@@ -127,6 +127,15 @@ return row.querySelector('input.mantine-NumberInput-input');
 """
 
 
+_OPEN_FOLDER = """
+const t = document.evaluate(`//*[normalize-space(text())='${arguments[0]}']`, document, null,
+                            XPathResult.FIRST_ORDERED_NODE_TYPE, null).singleNodeValue;
+t.scrollIntoView({block: 'center'});
+t.click();
+"""
+_SHOWN = "const r = arguments[0].getBoundingClientRect(); return r.width > 0 && r.height > 0;"
+
+
 def _button(driver: WebDriver, text: str) -> WebElement | None:
     """The button labelled ``text``, scrolled to the middle of its panel (None if there is none)."""
     return driver.execute_script(_FIND_BUTTON, text)
@@ -208,6 +217,10 @@ def _shaft(app: UiApp) -> np.ndarray:
         return app.session.closed.world.shaft_axis()[1]
 
 
+def _turned_deg(d0: np.ndarray, d1: np.ndarray) -> float:
+    return math.degrees(math.acos(float(np.clip(d0 @ d1, -1.0, 1.0))))
+
+
 def test_grip_and_push_from_the_page_turn_the_scope_about_the_incision(app: UiApp, browser: WebDriver) -> None:
     wait_sim(app, 0.5)
     plots_before = _plot_pixels(browser)
@@ -218,9 +231,11 @@ def test_grip_and_push_from_the_page_turn_the_scope_about_the_incision(app: UiAp
     wait_for(lambda: app.session.hand.grip_force > 0, 10, "the grip from the page")
     _type_number(browser, "push (N)", "15")
     wait_for(lambda: app.session.hand.push_magnitude == 15.0, 10, "the push from the page")
-    wait_sim(app, 3.0)
+    t_push = app.session.time
+    wait_for(lambda: _turned_deg(d0, _shaft(app)) > 2.5 or app.session.time > t_push + 3.0, 120,
+             "the scope to turn (at most 3 s of simulated time)")
     d1 = _shaft(app)
-    turned = math.degrees(math.acos(float(np.clip(d0 @ d1, -1.0, 1.0))))
+    turned = _turned_deg(d0, d1)
     rcm_mm = app.session.max_rcm_error * 1e3
     snap = app.session.snapshot
     assert snap is not None and snap.held is None, f"no hold: {snap and snap.held}"
@@ -292,7 +307,7 @@ def test_dragging_the_handle_gizmo_on_the_canvas_pushes_the_handle_and_releasing
     after = app.session.snapshot
     t, values = app.session.history.window(["|F| interaction"])
     w_h = values["|F| interaction"][t > t_drag]
-    turned = math.degrees(math.acos(float(np.clip(d0 @ _shaft(app), -1.0, 1.0))))
+    turned = _turned_deg(d0, _shaft(app))
     rcm_mm = app.session.max_rcm_error * 1e3
     print(f"dragged {dragged} m, pull {pull} N after {held_s:.2f} s, |W_h| max {w_h.max():.2f} N,"
           f" turned {turned:.2f} deg, max physical RCM error {rcm_mm:.3f} mm")
@@ -321,10 +336,8 @@ def test_the_needle_search_button_plays_the_scenario(app: UiApp, browser: WebDri
 def test_a_bad_parameter_is_shown_on_the_page_and_the_simulation_keeps_running(
     app: UiApp, browser: WebDriver
 ) -> None:
-    folder = browser.find_element(By.XPATH, "//*[normalize-space(text())='Live parameters']")
-    browser.execute_script("arguments[0].scrollIntoView({block: 'center'});", folder)
-    folder.click()
-    wait_for(lambda: _number_input(browser, "ε2 (px)").is_displayed(), 10, "the parameter inputs")
+    browser.execute_script(_OPEN_FOLDER, "Live parameters")
+    wait_for(lambda: browser.execute_script(_SHOWN, _number_input(browser, "ε2 (px)")), 30, "the parameter inputs")
     eps2 = app.session.cfg.tracking.epsilon2
     _type_number(browser, "ε2 (px)", "10")  # below ε1 = 50: the configuration refuses it
     _button(browser, "Apply parameters").click()  # type: ignore[union-attr]

@@ -13,6 +13,7 @@ from lapwrench.ui.inputs import (
     GRIP_LEVELS,
     MAX_HAND_FORCE,
     HandInput,
+    HandWrenchCache,
     UiInputError,
     checked_choice,
     checked_number,
@@ -87,3 +88,42 @@ def test_hand_input_caps_its_total_force_and_keeps_the_last_good_values() -> Non
         hand.set_grip_delta(math.inf, 2000.0)
     hand.release()
     assert hand.grip_force == hand.push_magnitude == hand.twist_torque == 0.0
+
+
+def tilted_shaft() -> np.ndarray:
+    d = np.array([0.3, -0.2, -0.93])
+    return d / np.linalg.norm(d)
+
+
+def test_the_gizmo_pulls_across_the_shaft_as_the_push_does() -> None:
+    d = tilted_shaft()
+    hand = HandInput()
+    hand.set_gizmo(0.04 * d + np.array([0.03, 0.0, 0.0]))  # dragged along the shaft and across it
+    force, _ = hand.wrench(d)
+    assert abs(force @ d) < 1e-9, "no part of the pull along the shaft"
+    spring = GIZMO_STIFFNESS * np.array([0.03, 0.0, 0.0])
+    np.testing.assert_allclose(force, spring - (spring @ d) * d, atol=1e-9)  # the across part is kept whole
+    hand.set_gizmo(0.05 * d)  # straight along the shaft: no push at all
+    assert np.linalg.norm(hand.wrench(d)[0]) < 1e-9
+    assert np.linalg.norm(hand.gizmo) == pytest.approx(GIZMO_STIFFNESS * 0.05)  # the spring itself is unchanged
+
+
+def test_the_hand_wrench_cache_follows_the_hand_and_the_shaft() -> None:
+    d = tilted_shaft()
+    hand, cache = HandInput(), HandWrenchCache(turn=1e-3)
+    hand.set_push(0.0, 10.0)
+    f0, _, changed = cache.wrench(hand, d)
+    assert changed
+    np.testing.assert_array_equal(f0, hand.wrench(d)[0])
+    assert not cache.wrench(hand, d + 1e-4)[2], "a shaft turn below the tolerance reuses the wrench"
+    turned = d + np.array([0.0, 0.01, 0.0])
+    turned /= np.linalg.norm(turned)
+    f1, _, changed = cache.wrench(hand, turned)
+    assert changed and abs(f1 @ turned) < 1e-9
+    hand.set_twist(0.4)
+    _, torque, changed = cache.wrench(hand, turned)
+    assert changed
+    np.testing.assert_allclose(torque, 0.4 * turned)
+    hand.gizmo = np.array([5.0, 0.0, 0.0])  # even a field written directly counts
+    assert cache.wrench(hand, turned)[2]
+    assert cache.wrench(hand, turned, world=object())[2], "another world gets the hand again"

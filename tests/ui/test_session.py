@@ -47,6 +47,37 @@ def test_a_gripped_push_turns_the_scope_about_the_incision(session: Session) -> 
     assert {f"|F| {n}" for n in names} <= set(session.history.names())
 
 
+def test_the_gizmo_turns_the_scope_without_pushing_along_the_shaft(session: Session) -> None:
+    _, d0 = session.closed.world.shaft_axis()
+    session.hand.set_grip_level("high")
+    e1 = np.cross(d0, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    session.hand.set_gizmo(0.04 * e1 + 0.04 * d0)  # 12 N across the shaft and 12 N along it, as dragged
+    for _ in range(15):
+        run(session, 0.1)
+        _, d = session.closed.world.shaft_axis()
+        force = session.closed.world.hand_force()
+        assert abs(force @ d) < 0.05, "the pull does not push the scope in or out"
+        pull = session.hand.gizmo
+        assert np.linalg.norm(force) == pytest.approx(np.linalg.norm(pull - (pull @ d) * d), rel=0.01)
+    assert angle_deg(d0, d) > 1.0
+    assert session.max_rcm_error < 0.0005
+    assert session.held is None
+
+
+def test_the_page_hand_is_set_again_after_a_scenario_and_follows_a_change(session: Session) -> None:
+    session.hand.set_push(0.0, 10.0)
+    session.play("view-adjustment")
+    run(session, 0.2)
+    session.stop_script()
+    run(session, 0.01)
+    _, d = session.closed.world.shaft_axis()
+    np.testing.assert_allclose(session.closed.world.hand_force(), session.hand.wrench(d)[0], atol=0.05)
+    session.hand.set_push(90.0, 4.0)
+    run(session, 0.001)
+    assert np.linalg.norm(session.closed.world.hand_force()) == pytest.approx(4.0)
+
+
 def test_an_ungripped_push_barely_moves_the_scope(session: Session) -> None:
     _, d0 = session.closed.world.shaft_axis()
     session.hand.set_push(0.0, 15.0)

@@ -53,6 +53,10 @@ class UiApp:
         self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
         self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
         self.server = viser.ViserServer(host=opts.host, port=opts.port, label="lapwrench", verbose=False)
+        # No shadows and no environment map (image-based lighting): in a browser without a GPU (software
+        # WebGL) they cost most of each frame, and a busy browser takes the CPU the simulation needs.
+        self.server.scene.configure_default_lights(True, cast_shadow=False)
+        self.server.scene.configure_environment_map(None)
         self.server.initial_camera.position = (1.25, -0.75, 0.85)
         self.server.initial_camera.look_at = (0.5, 0.0, 0.3)
         world = self.session.closed.world

@@ -88,8 +88,8 @@ class Controls:
             self.magnitude = gui.add_slider("push (N)", 0.0, MAX_HAND_FORCE, 0.5, 0.0)
             self.torque = gui.add_slider("torque about shaft (N m)", -MAX_HAND_TORQUE, MAX_HAND_TORQUE, 0.05, 0.0)
             self.release = gui.add_button("Let go")
-            gui.add_markdown(f"Drag the gizmo at the handle: {GIZMO_STIFFNESS / 100:.0f} N per cm, at most "
-                             f"{MAX_HAND_FORCE:.0f} N. Arrows: hand red, trocar orange, cues by colour.")
+            gui.add_markdown(f"Drag the gizmo at the handle: {GIZMO_STIFFNESS / 100:.0f} N per cm across the shaft, "
+                             f"at most {MAX_HAND_FORCE:.0f} N. Arrows: hand red, trocar orange, cues by colour.")
         self.grip.on_click(self.guarded(lambda e: hand.set_grip_level(e.target.value)))
         k_H = lambda: self.session.cfg.interaction.k_H  # noqa: E731 - read when used: parameters change
         self.delta.on_update(self.guarded(lambda e: hand.set_grip_delta(e.target.value, k_H())))

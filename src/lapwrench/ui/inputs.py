@@ -6,7 +6,10 @@ dropdown an unknown choice. Each value passes through :func:`checked_number` or
 
 The hand: a grip force (N) from a named level or from a wanted grip gain δ, a push on the handle
 across the shaft (direction about the shaft, magnitude), a torque about the shaft, and the pull of
-the draggable handle gizmo (a spring: force proportional to how far it is dragged, capped).
+the draggable handle gizmo (a spring: force proportional to how far it is dragged, capped). Like the
+push, the gizmo's pull acts across the shaft only: its part along the shaft would push the scope in
+or out through the trocar (the wall then drags the incision), which the paper's hand-guiding never
+does.
 """
 
 from __future__ import annotations
@@ -61,12 +64,21 @@ def grip_force_for_delta(delta: float, k_H: float, model: GripModel | None = Non
 
 
 def perpendicular_basis(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors across the shaft direction ``d``: e1 toward the base x axis (or y when the
-    shaft is along x), e2 = d x e1. Azimuth 0° pushes along e1, 90° along e2."""
-    ref = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = ref - (ref @ d) * d
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(d, e1)
+    """Two unit vectors across the shaft direction ``d`` (a unit vector): e1 toward the base x axis
+    (or y when the shaft is along x), e2 = d x e1. Azimuth 0° pushes along e1, 90° along e2.
+    Plain float arithmetic: the session calls it every tick while the hand pushes."""
+    dx, dy, dz = (float(v) for v in d)
+    rx, ry = (1.0, 0.0) if abs(dx) < 0.9 else (0.0, 1.0)
+    k = rx * dx + ry * dy
+    ax, ay, az = rx - k * dx, ry - k * dy, -k * dz
+    n = math.sqrt(ax * ax + ay * ay + az * az)
+    ax, ay, az = ax / n, ay / n, az / n
+    return np.array([ax, ay, az]), np.array([dy * az - dz * ay, dz * ax - dx * az, dx * ay - dy * ax])
+
+
+def across_shaft(f: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The part of force ``f`` across the shaft direction ``d`` (a unit vector): f - (f . d) d."""
+    return f - float(f @ d) * d
 
 
 def push_force(d: np.ndarray, azimuth_deg: float, magnitude: float) -> np.ndarray:
@@ -94,7 +106,8 @@ class HandInput:
         push_azimuth_deg: direction of the push about the shaft (see :func:`perpendicular_basis`).
         push_magnitude: N across the shaft.
         twist_torque: N m about the shaft (positive: right-handed about the shaft direction).
-        gizmo: N, the handle gizmo's pull (:func:`gizmo_force`) while it is dragged.
+        gizmo: N, the handle gizmo's spring pull (:func:`gizmo_force`) while it is dragged; the
+            hand applies its part across the shaft (:func:`across_shaft`), as the push.
     """
 
     grip_force: float = 0.0
@@ -104,13 +117,19 @@ class HandInput:
     gizmo: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def wrench(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(force N, torque N m) on the handle in {B} for the shaft direction ``d``; the total force
-        is capped at :data:`MAX_HAND_FORCE`."""
-        f = push_force(d, self.push_azimuth_deg, self.push_magnitude) + self.gizmo
+        """(force N, torque N m) on the handle in {B} for the shaft direction ``d`` (a unit vector):
+        the push and the gizmo's pull, both across the shaft, the total capped at
+        :data:`MAX_HAND_FORCE`."""
+        f = push_force(d, self.push_azimuth_deg, self.push_magnitude) + across_shaft(self.gizmo, d)
         n = float(np.linalg.norm(f))
         if n > MAX_HAND_FORCE:
             f = f * (MAX_HAND_FORCE / n)
         return f, self.twist_torque * d
+
+    def key(self) -> tuple[float, float, float, float, bytes]:
+        """What the hand asks, as a value: equal keys give the same :meth:`wrench` for the same shaft."""
+        return (self.grip_force, self.push_azimuth_deg, self.push_magnitude, self.twist_torque,
+                np.asarray(self.gizmo, float).tobytes())
 
     def set_grip_level(self, level: object) -> None:
         self.grip_force = GRIP_LEVELS[checked_choice(level, "grip", tuple(GRIP_LEVELS))]
@@ -138,6 +157,29 @@ class HandInput:
         """Hand off: no grip, no push, no torque."""
         self.grip_force = self.push_magnitude = self.twist_torque = 0.0
         self.gizmo = np.zeros(3)
+
+
+class HandWrenchCache:
+    """The hand's wrench (:meth:`HandInput.wrench`) for the shaft direction, recomputed only when the
+    hand changed (:meth:`HandInput.key`), the world is another one, or the shaft turned by more than
+    ``turn`` (unit-vector change; 1e-3 ≈ 0.06° leaves at most 0.1 % of the force along the shaft):
+    the session asks for it every tick, and the hand seldom changes between two."""
+
+    def __init__(self, turn: float = 1e-3) -> None:
+        self.turn = turn
+        self._key: tuple | None = None
+        self._world: object = None
+        self._d = np.zeros(3)
+        self._wrench = (np.zeros(3), np.zeros(3))
+
+    def wrench(self, hand: HandInput, d: np.ndarray, world: object = None) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(force N, torque N m, whether it was recomputed) for shaft direction ``d`` in ``world``."""
+        key = hand.key()
+        changed = key != self._key or world is not self._world or float(np.max(np.abs(d - self._d))) > self.turn
+        if changed:
+            self._key, self._world, self._d = key, world, np.array(d, float)
+            self._wrench = hand.wrench(self._d)
+        return self._wrench[0], self._wrench[1], changed
 
 
 def _is_vector(value: object) -> bool:

@@ -34,7 +34,7 @@ from lapwrench.sim.scripts import TISSUE_DEPTH, park_instrument
 from lapwrench.sim.surgeon import HousingDisturbance
 from lapwrench.sim.world import CONTROL_DT
 from lapwrench.ui.history import History, mode_index
-from lapwrench.ui.inputs import HandInput, UiInputError, checked_choice, checked_number
+from lapwrench.ui.inputs import HandInput, HandWrenchCache, UiInputError, checked_choice, checked_number
 from lapwrench.ui.playback import PLAYABLE, ScriptPlayer, make_script
 
 DETECTORS = ("projected", "shipped")
@@ -156,12 +156,12 @@ class Session:
         self.held: str | None = None
         self.alarms: list[str] = []
         self.max_rcm_error = 0.0  # m, physical, since the last reset_stats()
-        self.ticks = 0
         self.snapshot: Snapshot | None = None
-        self._req = _Requests()
+        self.ticks, self._req = 0, _Requests()
         self._disturbance: HousingDisturbance | None = None
         self._script: ScriptPlayer | None = None
         self._last: TickResult | None = None
+        self._hand = HandWrenchCache()  # the page's hand as last set on the world
 
     # -- what the page asks -------------------------------------------------------------------
     @property
@@ -229,8 +229,7 @@ class Session:
             old, self.closed, self.detector = self.closed, closed, det
             self.held, self.alarms, self._last, self.snapshot = None, [], None, None
             self._disturbance = self._script = None
-            self._req = _Requests()
-            self.max_rcm_error = 0.0
+            self._req, self.max_rcm_error = _Requests(), 0.0
             self.history.clear()
         old.world.close()
 
@@ -274,12 +273,13 @@ class Session:
         return res
 
     def _apply_hand(self) -> float:
-        """The page's hand on the world, plus a playing scenario's (:mod:`lapwrench.ui.playback`)."""
+        """The page's hand on the world, plus a playing scenario's (:mod:`lapwrench.ui.playback`). The
+        hand stays on the world until changed: set again only when it changed (:class:`HandWrenchCache`)."""
         w = self.closed.world
-        _, d = w.shaft_axis()
-        force, torque = self.hand.wrench(d)
+        force, torque, changed = self._hand.wrench(self.hand, w.shaft_axis()[1], w)
         if self._script is None:
-            w.set_hand_wrench(force=force, torque=torque)
+            if changed:
+                w.set_hand_wrench(force=force, torque=torque)
             return self.hand.grip_force
         grip, finished = self._script.apply(w, self.closed.t, force, torque, self.hand.grip_force)
         if finished:
@@ -290,6 +290,7 @@ class Session:
         """The scenario is over: only the page's hand from the next tick, and the page's instruments."""
         self._script = None
         self._req.instruments_dirty = True
+        self._hand = HandWrenchCache()  # the script's hand is on the world: set the page's again
 
     def _apply_requests(self) -> None:
         r, c = self._req, self.closed

@@ -28,6 +28,7 @@ from lapwrench.sim.scene.names import CAMERA_NAME
 from lapwrench.ui.session import NoRenderCamera, Session, Snapshot
 
 MIN_FPS = 5.0  # the view's lowest frame rate when the simulation falls behind
+RENDER_NICE = 5  # the render process's niceness above the simulation's: on a busy machine frames wait
 
 
 def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> None:
@@ -42,6 +43,8 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("LP_NUM_THREADS", "1")
+    with contextlib.suppress(OSError):  # when the two compete for a core, the simulation goes first
+        os.nice(RENDER_NICE)
     import mujoco
 
     from lapwrench.sim.offscreen import make_renderer, scope_view_option
@@ -167,9 +170,10 @@ class LaparoscopeView:
     def _start_renderer(self) -> None:
         ctx = mp.get_context("spawn")  # no fork of a threaded process with GL state
         parent, child = ctx.Pipe()
-        self._process = ctx.Process(target=render_worker, args=(to_dict(self.session.cfg), self.scale, child),
-                                    name="lapwrench-ui-render", daemon=True)
-        self._process.start()
+        process = ctx.Process(target=render_worker, args=(to_dict(self.session.cfg), self.scale, child),
+                              name="lapwrench-ui-render", daemon=True)
+        process.start()
+        self._process = process  # only a started process: _run joins it
         child.close()
         if not parent.poll(120.0) or parent.recv() != "ready":
             raise RuntimeError("the render process did not start")
