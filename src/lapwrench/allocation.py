@@ -7,10 +7,13 @@ import math
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec, cholesky_inverse, matvec
+from lapwrench.spatial import Mat, Vec, cholesky_inverse, matmul, matvec
 
 # Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
 RCOND = 1e-10
+# Below this Frobenius condition number ``regularised_inverse`` keeps the Cholesky inverse: it then agrees with
+# LAPACK's LU inverse to about 1e-10 relative (round-off times the condition number).
+CHOLESKY_CONDITION = 1e5
 
 
 @kernel
@@ -29,20 +32,31 @@ def weighted_pseudo_inverse(J: Mat, Minv: Mat, null_direction: Vec | None = None
     |e_R|² (about 1e-10 of the largest at |e_R| = 10 µm).
 
     J M⁻¹ is formed once: J M⁻¹ Jᵀ is (J M⁻¹) Jᵀ, evaluated in the printed order (near the damping
-    threshold A's condition number reaches 1e10, and another order of the products moves A⁻¹ by
-    1e-7), and M⁻¹ Jᵀ is its transpose (M⁻¹ is symmetric).
+    threshold A's condition number reaches 1e10, and another order of the products, or another
+    rounding of them, moves A⁻¹ by 1e-7), and M⁻¹ Jᵀ is its transpose (M⁻¹ is symmetric).
     """
-    JM = J @ Minv
-    A = JM @ np.ascontiguousarray(J.T)
+    m = J.shape[0]
     if null_direction is None:
-        A_inv = regularised_inverse(A, rcond)
+        # BLAS, as numpy's printed formula: near the damping threshold A's condition number reaches 1e10, and
+        # only the same rounding of J M⁻¹ and (J M⁻¹) Jᵀ gives the printed A⁻¹ to 1e-9
+        JM = J @ Minv
+        A_inv = regularised_inverse(JM @ np.ascontiguousarray(J.T), rcond)
     else:
-        nn = np.outer(null_direction, null_direction)
-        A_inv, ok = cholesky_inverse(A + nn)
+        # (J M⁻¹) Jᵀ + n nᵀ is well conditioned: loops, without BLAS's call cost
+        JM = matmul(J, Minv)
+        A = matmul(JM, J.T)
+        nd = null_direction
+        for i in range(m):
+            for j in range(m):
+                A[i, j] += nd[i] * nd[j]  # A + n nᵀ
+        A_inv, ok = cholesky_inverse(A)
         if not ok:
-            A_inv = regularised_inverse(A + nn, rcond)
-        A_inv = A_inv - nn
-    return np.ascontiguousarray(JM.T) @ A_inv
+            A_inv = regularised_inverse(A, rcond)
+        for i in range(m):
+            for j in range(m):
+                A_inv[i, j] -= nd[i] * nd[j]
+    J_pinv = matmul(JM.T, A_inv)  # (J M⁻¹)ᵀ A⁻¹
+    return J_pinv
 
 
 @kernel
@@ -60,15 +74,30 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     is at most 1/``rcond``, every λ >= δ and A⁻¹ is returned as ``inv(A)``, the printed formula.
     (LAPACK's LU, like numpy's ``inv``, not a Cholesky factor: near the damping threshold the
     condition number reaches 1e10, and only the same algorithm gives the printed formula's value
-    to 1e-9 there.)
+    to 1e-9 there. Below :data:`CHOLESKY_CONDITION`, where both agree to round-off, the cheaper
+    Cholesky inverse is kept.)
     """
+    A_inv, ok = cholesky_inverse(A)
+    if ok and _frobenius_condition(A, A_inv) <= CHOLESKY_CONDITION:
+        return A_inv  # well conditioned: Cholesky and LU agree to round-off, the factor is cheaper
     try:
         A_inv = np.linalg.inv(A)
     except Exception:  # singular (numpy's LinAlgError; numba raises its own)
         return _damped_inverse(A, rcond)
-    if rcond * math.sqrt(np.sum(A * A) * np.sum(A_inv * A_inv)) <= 1.0:  # False on inf/nan
+    if rcond * _frobenius_condition(A, A_inv) <= 1.0:  # False on inf/nan
         return A_inv
     return _damped_inverse(A, rcond)
+
+
+@kernel
+def _frobenius_condition(A: Mat, A_inv: Mat) -> float:
+    """‖A‖ ‖A⁻¹‖ in the Frobenius norm (>= λ_max / λ_min for a symmetric A)."""
+    norm2, inv_norm2 = 0.0, 0.0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            norm2 += A[i, j] * A[i, j]
+            inv_norm2 += A_inv[i, j] * A_inv[i, j]
+    return math.sqrt(norm2 * inv_norm2)
 
 
 @kernel
@@ -86,7 +115,11 @@ def _damped_inverse(A: Mat, rcond: float) -> Mat:
 @kernel
 def nullspace_projector(J: Mat, J_pinv: Mat) -> Mat:
     """Eq (3): N = I_n - J⁺ J."""
-    return np.eye(J.shape[1]) - J_pinv @ J
+    N = matmul(J_pinv, J)
+    for i in range(N.shape[0]):
+        for j in range(N.shape[1]):
+            N[i, j] = (1.0 if i == j else 0.0) - N[i, j]
+    return N
 
 
 @kernel
@@ -118,4 +151,14 @@ def nullspace_torque(J_G: Mat, W_n: Vec) -> Vec:
 @kernel
 def task_priority_torque(J_R: Mat, F_r: Vec, N_r: Mat, tau_n: Vec) -> Vec:
     """Eq (2): τ = J_Rᵀ F_r + N_rᵀ τ_n."""
-    return matvec(J_R.T, F_r) + matvec(N_r.T, tau_n)
+    n = J_R.shape[1]
+    tau = np.empty(n)
+    for i in range(n):
+        a = 0.0
+        for k in range(J_R.shape[0]):
+            a += J_R[k, i] * F_r[k]
+        b = 0.0
+        for k in range(n):
+            b += N_r[k, i] * tau_n[k]
+        tau[i] = a + b
+    return tau

@@ -43,6 +43,9 @@ INFEASIBLE_TICKS_TO_STOP = 10
 Mode = Literal["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
 
 
+_new_tuple = tuple.__new__  # builds a named tuple from its fields in order, without a Python-level call
+
+
 def _norm(v: Vec) -> float:
     return math.sqrt(v.dot(v))  # ndarray.dot: the same BLAS dot as ``v @ v``, with less call overhead
 
@@ -229,7 +232,7 @@ class Controller:
             else:
                 (q, dq, ddq), clamped = r.ref, r.clamped
         self.shaper.clamped_ticks += bool(clamped)
-        self.ref = ReferenceState(q, dq, ddq)
+        self.ref = _new_tuple(ReferenceState, (q, dq, ddq))  # without the keyword-handling constructor
 
         e_norm = _norm(r.e_R)
         if e_norm > self._max_rcm_error:

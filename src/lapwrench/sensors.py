@@ -99,8 +99,8 @@ _F64 = np.dtype(np.float64)
 
 def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (n,) and x.flags.carray:
-        return x  # the common case, checked cheaply
+    if type(x) is np.ndarray and x.dtype is _F64 and x.ndim == 1 and len(x) == n and x.flags.carray:
+        return x  # the common case, checked cheaply (no shape tuple built)
     a = real_array(x)
     return a if a is not None and a.shape == (n,) else None
 

@@ -68,6 +68,32 @@ def matvec(A: Mat, x: Vec) -> Vec:
 
 
 @kernel
+def matmul(A: Mat, B: Mat, scale: float = 1.0) -> Mat:
+    """(scale A) B, in loops: for the tick's small matrices numba's ``@`` (a BLAS call, its output and,
+    for a transposed operand, a contiguous copy) costs more than the arithmetic. Pass transposes as
+    views (``A.T``). Each element is summed in the order of the inner index, row by row, so the
+    loops stay independent (no chain of dependent additions)."""
+    m, k = A.shape
+    n = B.shape[1]
+    C = np.zeros((m, n))
+    for i in range(m):
+        for p in range(k):
+            a = scale * A[i, p]
+            for j in range(n):
+                C[i, j] += a * B[p, j]
+    return C
+
+
+@kernel
+def all_finite(x: Vec) -> bool:
+    """Every element of the vector ``x`` is a number (``np.isfinite(x).all()`` without its temporary array)."""
+    for i in range(x.shape[0]):  # noqa: SIM110 (a loop: numba's all() of a generator is slower)
+        if not math.isfinite(x[i]):
+            return False
+    return True
+
+
+@kernel
 def inner(a: Vec, b: Vec) -> float:
     """aᵀ b, in a loop (numba's ``@`` of two vectors is a BLAS call too)."""
     acc = 0.0
@@ -142,16 +168,23 @@ def lu_solve(A: Mat, b: Vec) -> tuple[Vec, bool]:
 
     Returns (x, True), or (NaNs, False) when a pivot is exactly zero (A singular).
     """
-    n = A.shape[0]
-    U = A.copy()
     x = b.copy()
+    return x, lu_solve_in_place(A.copy(), x)
+
+
+@kernel
+def lu_solve_in_place(U: Mat, x: Vec) -> bool:
+    """:func:`lu_solve` overwriting its arguments: ``U`` (A on entry) with its eliminated form, ``x``
+    (b on entry) with the solution (NaNs and False when a pivot is exactly zero)."""
+    n = U.shape[0]
     for k in range(n):
         p = k
         for i in range(k + 1, n):
             if abs(U[i, k]) > abs(U[p, k]):
                 p = i
         if U[p, k] == 0.0:
-            return np.full(n, np.nan), False
+            x[:] = np.nan
+            return False
         if p != k:
             for c in range(k, n):
                 U[k, c], U[p, c] = U[p, c], U[k, c]
@@ -166,7 +199,7 @@ def lu_solve(A: Mat, b: Vec) -> tuple[Vec, bool]:
         for c in range(i + 1, n):
             v -= U[i, c] * x[c]
         x[i] = v / U[i, i]
-    return x, True
+    return True
 
 
 @dataclass(frozen=True)

@@ -5,11 +5,9 @@ and M once per tick (M⁻¹ by M's Cholesky factor); the rest is compiled, in tw
 no cue runs in Python, :func:`tick_stage`):
 
 1. :func:`geometry_stage`: the adaptive RCM point (eq 19-26), the RCM error (eq 27), what the
-   measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry
-   (eq 28-36);
-2. :func:`motion_stage`: the wrenches (eq 5-14, 40), the task/null-space allocation (eq 2-4,
-   37-39), the self-motion terms, the integration of the virtual model, the joint-limit box and
-   the envelope rows.
+   measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry (eq 28-36);
+2. :func:`motion_stage`: the wrenches (eq 5-14, 40), the task/null-space allocation (eq 2-4, 37-39),
+   the self-motion terms, the integration of the virtual model, the joint-limit box and the envelope rows.
 
 Between them the controller evaluates the cues that run in Python (plugins,
 :mod:`lapwrench.wrenches.base`) on the tick's geometry; the paper's four run here, each only when
@@ -43,6 +41,7 @@ from lapwrench.motion.qp import QP_SOLVED
 from lapwrench.motion.reference_shaper import acceleration_bounds, advance_reference
 from lapwrench.motion.saturation import VIOLATION_TOL, at_bound, solve_exact
 from lapwrench.motion.virtual_model import (
+    add_self_motion_torque,
     damping_jacobian,
     euler_velocity_step,
     joint_limit_torque,
@@ -56,6 +55,7 @@ from lapwrench.rcm.geometry import (
     closest_point_jacobian,
     closest_point_parameter,
     lateral_rcm_jacobian,
+    lateral_task,
     rcm_error,
     rcm_error_rate,
     rcm_jacobian,
@@ -68,7 +68,7 @@ from lapwrench.robot.model import (
     inverse_inertia,
     scope_axis,
 )
-from lapwrench.spatial import Mat, Vec, matvec
+from lapwrench.spatial import Mat, Vec, all_finite, matvec
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
 from lapwrench.wrenches.rcm import rcm_force
@@ -185,9 +185,7 @@ def motion_stage(
     W_c = np.zeros(6)
     if p.cue_tracking:
         W_c[3:] = virtual_force(points, p.tracking, kin.R_C)
-    D = np.zeros((6, 6))
-    if p.cue_viscous:
-        D = p.D_guided if delta > 0.0 else p.D_unguided
+    D = (p.D_guided if delta > 0.0 else p.D_unguided) if p.cue_viscous else np.zeros((6, 6))
     W_f = -matvec(D, matvec(geo.J_G, kin.dq))
 
     # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
@@ -208,29 +206,31 @@ def motion_stage(
     if p.joint_limit_stiffness != 0.0:
         push = joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
     tau = task_priority_torque(geo.J_R, W_r[3:] + extra_task_F, N_r, tau_n)
-    tau = tau + matvec(N_E_T, push) - matvec(B_self, kin.dq)
+    add_self_motion_torque(tau, N_E_T, push, B_self, kin.dq)
 
     # 6. integration of the virtual model, damping terms implicit
     B = damping_jacobian(geo.J_R, p.Kd, N_r, geo.J_G, D + extra_D, B_self)
-    non_finite = not np.isfinite(tau).all()
+    non_finite = not all_finite(tau)
     if non_finite:
         tau = np.zeros(kin.q.shape[0])
-    dq_next = euler_velocity_step(kin, tau, B, p.dt, p.integrator)
-    a_d = (dq_next - kin.dq) / p.dt
+    a_d = euler_velocity_step(kin, tau, B, p.dt, p.integrator)  # θ̇⁺, made the acceleration in place
+    for i in range(a_d.shape[0]):
+        a_d[i] = (a_d[i] - kin.dq[i]) / p.dt
 
     # 7. the limits: joint box, envelope rows; the null-space brake while stopping
     a_lo, a_hi = acceleration_bounds(kin.q, kin.dq, ddq_ref, p.q_lo, p.q_hi, p.v_max, p.a_max, p.j_max, p.dt)
-    J_task = np.ascontiguousarray(kin.R_E[:, :2].T) @ geo.J_R
+    J_task = lateral_task(kin.R_E, geo.J_R)
     if stopping:
         a_d = a_d - null_brake(J_task, Minv, kin.dq, p.stop_time)
     admitted = not _violated(a_lo, a_hi, a_d, p.a_max)
-    env_W, env_lo, env_hi = np.zeros((4, 6)), np.zeros(4), np.zeros(4)
-    env_scale, env_wall = np.ones(4), np.zeros(4, dtype=np.int64)
     if p.envelope_enabled:
         env_W, env_lo, env_hi, env_scale, env_wall = envelope_rows(
             kin, geo.p_R, a_d, depth_offset, R_E0, p.envelope, p.length, p.dt
         )
         admitted = admitted and not _violated(env_lo, env_hi, matvec(env_W, matvec(kin.J_E, a_d)), env_scale)
+    else:
+        env_W, env_lo, env_hi = np.zeros((4, 6)), np.zeros(4), np.zeros(4)
+        env_scale, env_wall = np.ones(4), np.zeros(4, dtype=np.int64)
     return MotionOutput(
         W_r, W_h, W_c, W_f, W_n, delta, contacts, tau, non_finite, a_d, a_lo, a_hi, J_task,
         env_W, env_lo, env_hi, env_scale, env_wall, admitted,
@@ -283,7 +283,7 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickP
     m = n + 4 if p.envelope_enabled else n
     ref = np.zeros((3, n))
     at = np.zeros(sat.lo.shape[0], dtype=np.bool_)
-    if not np.isfinite(sat.a_d).all():
+    if not all_finite(sat.a_d):
         return False, ref, at, False
     C, lo, hi, scale = sat.C[:m], sat.lo[:m], sat.hi[:m], sat.scale[:m]
     a, status = solve_exact(Minv, sat.a_d, sat.J_task, C, lo, hi, scale)

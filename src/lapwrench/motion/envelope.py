@@ -113,11 +113,14 @@ def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     The start frame's x axis is carried by the shortest rotation taking the start axis d_0 to the
     current d_z; the roll is the angle from that axis to the current x axis, about d_z.
     """
-    x0, d0 = np.ascontiguousarray(R_E0[:, 0]), np.ascontiguousarray(R_E0[:, 2])
-    x, d = np.ascontiguousarray(R_E[:, 0]), np.ascontiguousarray(R_E[:, 2])
+    x0, d0, x, d = R_E0[:, 0], R_E0[:, 2], R_E[:, 0], R_E[:, 2]  # columns as views
     k = cross3(d0, d)
     kx0 = cross3(k, x0)
-    x0s = x0 + kx0 + cross3(k, kx0) / (1.0 + inner(d0, d))
+    kkx0 = cross3(k, kx0)
+    c = 1.0 + inner(d0, d)
+    x0s = np.empty(3)
+    for i in range(3):
+        x0s[i] = x0[i] + kx0[i] + kkx0[i] / c
     return math.atan2(inner(cross3(x0s, x), d), inner(x0s, x))
 
 
@@ -137,14 +140,17 @@ def envelope_rows(
     twist = matvec(kin.J_E, kin.dq)
     # pivot: |ω⊥| bounded along its current direction u1 and across it (u2), so the polygon
     # re-aligned every tick keeps the norm at the limit; from rest, along the desired motion
-    w = twist[:3].copy()
+    w = twist[:3]  # a view: read only
     wd = inner(w, d)
     if inner(w, w) - wd * wd < 1e-12:
         w = matvec(kin.J_E[:3], kin.dq + dt * a_d)
         wd = inner(w, d)
-    u = w - wd * d
-    n = math.sqrt(inner(u, u))
-    u1 = u / n if n > 1e-9 else np.ascontiguousarray(kin.R_E[:, 0])
+    u1 = np.empty(3)  # u = w - (w·d) d, then normalised in place
+    for i in range(3):
+        u1[i] = w[i] - wd * d[i]
+    n = math.sqrt(inner(u1, u1))
+    for i in range(3):
+        u1[i] = u1[i] / n if n > 1e-9 else kin.R_E[i, 0]
     u2 = cross3(d, u1)
     W = np.zeros((4, 6))
     W[0] = insertion_rate_weights(d, r)

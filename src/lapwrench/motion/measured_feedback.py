@@ -21,7 +21,7 @@ import numpy as np
 from lapwrench.jit import kernel
 from lapwrench.rcm.geometry import insertion_depth, rcm_error
 from lapwrench.robot.model import Kinematics, RobotModel, ScopeAxis
-from lapwrench.spatial import Mat, Vec, inner
+from lapwrench.spatial import Mat, Vec, all_finite, inner
 
 FEEDBACK_TIME = 0.01  # s, time constant of the low-pass on the measured-minus-reference offsets
 NO_AXIS = ScopeAxis(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.diag([1.0, 1.0, 0.0]))  # "no measurement"
@@ -42,14 +42,19 @@ def feedback_step(
     e_target = np.zeros(3)
     d_target = 0.0
     if has_measured:
-        e_t = rcm_error(measured, p_R) - e_R
+        e_t = rcm_error(measured, p_R)
+        for i in range(3):
+            e_t[i] -= e_R[i]
         d_t = insertion_depth(measured, p_R, length) - insertion_depth(kin, p_R, length)
-        if np.isfinite(e_t).all() and math.isfinite(d_t):
+        if all_finite(e_t) and math.isfinite(d_t):
             e_target, d_target = e_t, d_t
-    e = offsets[:3] + gain * (e_target - offsets[:3])
+    e = np.empty(3)
+    for i in range(3):
+        e[i] = offsets[i] + gain * (e_target[i] - offsets[i])
     n = math.sqrt(inner(e, e))
     if n > cap:
-        e = e * (cap / n)
+        for i in range(3):
+            e[i] = e[i] * (cap / n)
     offsets[:3] = e
     d = offsets[3] + gain * (d_target - offsets[3])
     offsets[3] = min(cap, max(-cap, d))

@@ -22,7 +22,7 @@ import numpy as np
 
 from lapwrench.jit import kernel
 from lapwrench.robot.limits import JointLimits
-from lapwrench.spatial import Vec
+from lapwrench.spatial import Vec, all_finite
 
 
 class ReferenceState(NamedTuple):
@@ -34,20 +34,21 @@ class ReferenceState(NamedTuple):
 
 
 @kernel
-def braking_speeds(q: Vec, q_lo: Vec, q_hi: Vec, v_max: Vec, two_a_brake: Vec) -> tuple[Vec, Vec]:
-    """Largest speeds at q toward the lower and toward the upper limit: the velocity limit, and the
-    speed from which braking at a_brake stops the joint at its margin, v² = 2 a_brake room."""
+def braking_speeds(q: float, q_lo: float, q_hi: float, v_max: float, two_a_brake: float) -> tuple[float, float]:
+    """Largest speeds of one joint at q toward its lower and toward its upper limit: the velocity limit,
+    and the speed from which braking at a_brake stops the joint at its margin, v² = 2 a_brake room."""
     down = np.minimum(v_max, np.sqrt(two_a_brake * np.maximum(q - q_lo, 0.0)))
     up = np.minimum(v_max, np.sqrt(two_a_brake * np.maximum(q_hi - q, 0.0)))
     return down, up
 
 
 @kernel
-def reachable_acceleration(headroom: Vec, j_max: Vec, dt: float) -> Vec:
-    """Largest a with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
+def reachable_acceleration(headroom: float, j_max: float, dt: float) -> float:
+    """Largest a of one joint with v + a dt + a²/(2 j) <= v + headroom: the velocity still fits after a
     jerk-limited ramp of the acceleration back to zero. Negative headroom brakes at once."""
-    a = j_max * (np.sqrt(dt * dt + 2.0 / j_max * np.maximum(headroom, 0.0)) - dt)
-    return np.where(headroom >= 0.0, a, headroom / dt)
+    if headroom >= 0.0:
+        return j_max * (np.sqrt(dt * dt + 2.0 / j_max * headroom) - dt)
+    return headroom / dt
 
 
 @kernel
@@ -60,13 +61,18 @@ def acceleration_bounds(
     interval is never empty. The saturation step (:mod:`lapwrench.motion.saturation`) chooses an
     acceleration inside it that keeps the RCM task.
     """
-    down, up = braking_speeds(q + dq * dt, q_lo, q_hi, v_max, a_max)  # braking at half a_max
-    a_lo = -reachable_acceleration(down + dq, j_max, dt)
-    a_hi = reachable_acceleration(up - dq, j_max, dt)
-    jerk_step = j_max * dt
-    a_lo = np.minimum(np.maximum(np.minimum(np.maximum(a_lo, -a_max), a_max), ddq - jerk_step), ddq + jerk_step)
-    a_hi = np.minimum(np.maximum(np.minimum(np.maximum(a_hi, -a_max), a_max), ddq - jerk_step), ddq + jerk_step)
-    return a_lo, np.maximum(a_hi, a_lo)
+    n = q.shape[0]
+    a_lo, a_hi = np.empty(n), np.empty(n)
+    for i in range(n):  # joint by joint: scalars, no temporary arrays
+        down, up = braking_speeds(q[i] + dq[i] * dt, q_lo[i], q_hi[i], v_max[i], a_max[i])  # braking at half a_max
+        lo = -reachable_acceleration(down + dq[i], j_max[i], dt)
+        hi = reachable_acceleration(up - dq[i], j_max[i], dt)
+        jerk_step = j_max[i] * dt
+        a = a_max[i]
+        lo = np.minimum(np.maximum(np.minimum(np.maximum(lo, -a), a), ddq[i] - jerk_step), ddq[i] + jerk_step)
+        hi = np.minimum(np.maximum(np.minimum(np.maximum(hi, -a), a), ddq[i] - jerk_step), ddq[i] + jerk_step)
+        a_lo[i], a_hi[i] = lo, np.maximum(hi, lo)
+    return a_lo, a_hi
 
 
 @kernel
@@ -75,12 +81,19 @@ def advance_reference(
 ) -> tuple[Vec, Vec, Vec, bool]:
     """The next reference (q⁺, q̇⁺, q̈⁺) with acceleration ``a`` clipped into [a_lo, a_hi], and whether
     the clip changed ``a`` by more than round-off. A non-finite ``a`` brakes instead."""
-    if not np.isfinite(a).all():
+    if not all_finite(a):
         a = -dq / dt  # never propagate a NaN: brake instead
-    a_clip = np.minimum(np.maximum(a, a_lo), a_hi)
-    clamped = np.max(np.abs(a_clip - a)) > 1e-9 * (1.0 + np.max(np.abs(a)))
-    dq_next = dq + a_clip * dt
-    return q + dq_next * dt, dq_next, a_clip, clamped
+    n = q.shape[0]
+    q_next, dq_next, a_clip = np.empty(n), np.empty(n), np.empty(n)
+    change, size = 0.0, 0.0  # max |a_clip - a|, max |a|
+    for i in range(n):
+        a_clip[i] = np.minimum(np.maximum(a[i], a_lo[i]), a_hi[i])
+        change = max(change, abs(a_clip[i] - a[i]))
+        size = max(size, abs(a[i]))
+        dq_next[i] = dq[i] + a_clip[i] * dt
+        q_next[i] = q[i] + dq_next[i] * dt
+    clamped = change > 1e-9 * (1.0 + size)
+    return q_next, dq_next, a_clip, clamped
 
 
 class ReferenceShaper:

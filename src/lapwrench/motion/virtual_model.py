@@ -24,7 +24,7 @@ import numpy as np
 from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
 from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
-from lapwrench.spatial import Mat, Vec, lu_solve
+from lapwrench.spatial import Mat, Vec, lu_solve_in_place, matmul
 
 
 @kernel
@@ -38,7 +38,9 @@ def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     (:func:`~lapwrench.allocation.regularised_inverse`).
     """
     J = kin.J_E
-    return np.ascontiguousarray(nullspace_projector(J, weighted_pseudo_inverse(J, Minv)).T)
+    # eq (3) with the transposed factors, I - J_Eᵀ J_E⁺ᵀ = (I - J_E⁺ J_E)ᵀ, the same products summed in the
+    # same order: N_Eᵀ without a transposed copy
+    return nullspace_projector(weighted_pseudo_inverse(J, Minv).T, J.T)
 
 
 @kernel
@@ -54,7 +56,20 @@ def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     """
     if rate == 0.0:
         return np.zeros_like(kin.M)
-    return rate * N_E_T @ kin.M
+    return matmul(N_E_T, kin.M, rate)  # (d N_Eᵀ) M
+
+
+@kernel
+def add_self_motion_torque(tau: Vec, N_E_T: Mat, push: Vec, B_self: Mat, dq: Vec) -> None:
+    """τ += N_Eᵀ τ_push - B_s θ̇ in place: a torque through the self-motion projector (e.g. the joint-limit
+    push, :func:`joint_limit_torque`) and the self-motion damping (:func:`self_motion_damping`)."""
+    n = tau.shape[0]
+    for i in range(n):
+        pushed, damped = 0.0, 0.0
+        for k in range(n):
+            pushed += N_E_T[i, k] * push[k]
+            damped += B_self[i, k] * dq[k]
+        tau[i] = tau[i] + pushed - damped
 
 
 @kernel
@@ -64,8 +79,12 @@ def damping_jacobian(J_R: Mat, Kd: float, N_r: Mat, J_G: Mat, D: Mat, B_self: Ma
     The terms are eq (14)'s K_d ė_R through J_R (eq 2), the damping sources' -D J_G θ̇ (eq 40)
     through the null space (eq 2, 37) and the self-motion damping B_s.
     """
-    J_RT, N_rT = np.ascontiguousarray(J_R.T), np.ascontiguousarray(N_r.T)
-    return Kd * J_RT @ J_R + N_rT @ (np.ascontiguousarray(J_G.T) @ (D @ J_G)) + B_self
+    B = matmul(J_R.T, J_R, Kd)  # (K_d J_Rᵀ) J_R
+    null = matmul(N_r.T, matmul(J_G.T, matmul(D, J_G)))
+    for i in range(B.shape[0]):
+        for j in range(B.shape[1]):
+            B[i, j] = B[i, j] + null[i, j] + B_self[i, j]
+    return B
 
 
 @kernel
@@ -76,7 +95,11 @@ def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: f
     The controller applies it through :func:`self_motion_projector`, so the redundant self-motion
     keeps the joints away from their limits without moving the scope.
     """
-    return stiffness * (np.maximum(lower + zone - q, 0.0) - np.maximum(q - (upper - zone), 0.0))
+    n = q.shape[0]
+    tau = np.empty(n)
+    for i in range(n):
+        tau[i] = stiffness * (np.maximum(lower[i] + zone - q[i], 0.0) - np.maximum(q[i] - (upper[i] - zone), 0.0))
+    return tau
 
 
 @kernel
@@ -91,9 +114,18 @@ def euler_velocity_step(
 
     ``tau`` is the full fused torque evaluated at the current θ̇ (it already contains -B θ̇);
     ``damping`` is B, the Jacobian of -τ with respect to θ̇. The n x n system is solved by
-    :func:`~lapwrench.spatial.lu_solve` (partial pivoting, as LAPACK's, without its call cost); a
+    :func:`~lapwrench.spatial.lu_solve_in_place` (partial pivoting, as LAPACK's, without its call cost); a
     singular system gives NaNs, which the tick treats as a non-finite demand (it brakes).
     """
-    rhs = dt * (tau - (kin.nle - kin.gravity))
-    step, _ = lu_solve(kin.M if integrator == "explicit" else kin.M + dt * damping, rhs)
-    return kin.dq + step
+    n = tau.shape[0]
+    rhs = np.empty(n)
+    for i in range(n):
+        rhs[i] = dt * (tau[i] - (kin.nle[i] - kin.gravity[i]))
+    A = np.empty((n, n))  # M, or M + dt B
+    for i in range(n):
+        for j in range(n):
+            A[i, j] = kin.M[i, j] if integrator == "explicit" else kin.M[i, j] + dt * damping[i, j]
+    lu_solve_in_place(A, rhs)  # rhs becomes the step
+    for i in range(n):
+        rhs[i] += kin.dq[i]
+    return rhs

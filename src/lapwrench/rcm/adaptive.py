@@ -123,7 +123,10 @@ def lateral_component(P: Mat, F_re: Vec) -> Vec:
 @kernel
 def rcm_point_rate(F_re_lateral: Vec, p_R: Vec, p_R_anchor: Vec, alpha: float, beta: float) -> Vec:
     """Eq (24): ṗ_R = -α F_re⊥ - β (p_R - p_R*)."""
-    return -alpha * F_re_lateral - beta * (p_R - p_R_anchor)
+    rate = np.empty(3)
+    for i in range(3):
+        rate[i] = -alpha * F_re_lateral[i] - beta * (p_R[i] - p_R_anchor[i])
+    return rate
 
 
 @kernel
@@ -135,6 +138,24 @@ def gate_ramp(x: float, limit: float, soft: float) -> float:
     if x >= limit:
         return 0.0
     return 0.5 * (1.0 + math.cos(math.pi * (x - lo) / (limit - lo)))
+
+
+@kernel
+def _projected_norm(P: Mat, x: Vec, start: int) -> float:
+    """‖P x[start:start + 3]‖ for a 3 x 3 P (no temporary arrays)."""
+    s = 0.0
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += P[i, j] * x[start + j]
+        s += acc * acc
+    return math.sqrt(s)
+
+
+@kernel
+def _norm_at(x: Vec, start: int) -> float:
+    """‖x[start:start + 3]‖."""
+    return math.sqrt(x[start] * x[start] + x[start + 1] * x[start + 1] + x[start + 2] * x[start + 2])
 
 
 @kernel
@@ -153,14 +174,16 @@ def gate_weight(st: AdaptiveState, P: Mat, twist: Vec, dt: float, p: AdaptivePar
         st.twist_f[:] = twist
         sc[1] = 1.0
     k = dt / (p.gate_filter_time + dt)
-    step = k * (twist - st.twist_f)
-    st.twist_f[:] = st.twist_f + step
-    accel = step / dt
-    w_ang, a_ang = matvec(P, twist[:3]), matvec(P, accel[:3])
-    sc[3] = math.sqrt(inner(w_ang, w_ang))
-    sc[4] = math.sqrt(inner(twist[3:], twist[3:]))
-    sc[5] = math.sqrt(inner(a_ang, a_ang))
-    sc[6] = math.sqrt(inner(accel[3:], accel[3:]))
+    accel = np.empty(6)
+    tf = st.twist_f
+    for i in range(6):
+        step = k * (twist[i] - tf[i])
+        tf[i] = tf[i] + step
+        accel[i] = step / dt
+    sc[3] = _projected_norm(P, twist, 0)
+    sc[4] = _norm_at(twist, 3)
+    sc[5] = _projected_norm(P, accel, 0)
+    sc[6] = _norm_at(accel, 3)
     w_raw = min(
         gate_ramp(sc[3], p.gate_angular_speed, p.gate_soft),
         gate_ramp(sc[4], p.gate_linear_speed, p.gate_soft),
@@ -188,11 +211,15 @@ def adaptive_rcm_step(
         return F_lat
     if has_residual:
         F_lat = lateral_component(P, dead_zone_saturation(residual, p.gamma1, p.gamma2, p.F_op, p.ramp))
-    st.velocity[:] = rcm_point_rate(w * F_lat, st.p_R, st.p_R_anchor, p.alpha, p.beta)
+    wF = np.empty(3)
+    for i in range(3):
+        wF[i] = w * F_lat[i]
+    st.velocity[:] = rcm_point_rate(wF, st.p_R, st.p_R_anchor, p.alpha, p.beta)
     if math.sqrt(inner(st.velocity, st.velocity)) <= p.epsilon:  # eq (25)
         st.p_R_anchor[:] = st.p_R  # eq (26)
         st.scalars[2] += 1.0
-    st.p_R[:] = st.p_R + dt * st.velocity
+    for i in range(3):
+        st.p_R[i] = st.p_R[i] + dt * st.velocity[i]
     return F_lat
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics, ScopeAxis
-from lapwrench.spatial import Mat, Vec, inner, matvec, skew
+from lapwrench.spatial import Mat, Vec, inner, matmul, matvec, skew
 
 
 class TaskGeometry(NamedTuple):
@@ -39,13 +39,30 @@ def initial_rcm_point(kin: Kinematics | ScopeAxis, length: float, lambda0: float
 @kernel
 def rcm_error(kin: Kinematics | ScopeAxis, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
-    return matvec(kin.P, p_R - kin.p_E)
+    P, p_E = kin.P, kin.p_E
+    e = np.empty(3)
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += P[i, j] * (p_R[j] - p_E[j])
+        e[i] = acc
+    return e
 
 
 @kernel
 def insertion_depth(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Depth (m) of the scope tip beyond p_R along the shaft: L - d_zᵀ (p_R - p_E) (tip at p_E + L d_z)."""
-    return length - inner(kin.d_z, p_R - kin.p_E)
+    return length - _axial(kin, p_R)
+
+
+@kernel
+def _axial(kin: Kinematics | ScopeAxis, p_R: Vec) -> float:
+    """d_zᵀ (p_R - p_E): how far p_R lies along the shaft from p_E (no temporary arrays)."""
+    d, p_E = kin.d_z, kin.p_E
+    acc = 0.0
+    for i in range(3):
+        acc += d[i] * (p_R[i] - p_E[i])
+    return acc
 
 
 @kernel
@@ -85,21 +102,43 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     near it (its third eigenvalue scales with |e_R|²). The lateral form has the exact null
     direction d_z at every configuration, so its pseudo-inverse is exact and well conditioned.
     """
-    d = kin.d_z
-    r = p_R - kin.p_E
-    return inner(d, r) * skew(d) @ np.ascontiguousarray(kin.J_E[:3]) - kin.P @ np.ascontiguousarray(kin.J_E[3:])
+    S = skew(kin.d_z)
+    c = _axial(kin, p_R)  # d_zᵀ r
+    J_E, P = kin.J_E, kin.P
+    n = J_E.shape[1]
+    J = np.empty((3, n))
+    for i in range(3):
+        for j in range(n):
+            rot, lin = 0.0, 0.0
+            for k in range(3):
+                rot += (c * S[i, k]) * J_E[k, j]
+                lin += P[i, k] * J_E[k + 3, j]
+            J[i, j] = rot - lin
+    return J
+
+
+@kernel
+def lateral_task(R_E: Mat, J_R: Mat) -> Mat:
+    """The lateral RCM task J = [x_E  y_E]ᵀ J_R (2 x n): the RCM error's two rates across the shaft."""
+    return matmul(R_E[:, :2].T, J_R)
 
 
 @kernel
 def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
-    return matvec(J_R, kin.dq) + matvec(kin.P, rcm_velocity)
+    rate = matvec(J_R, kin.dq)
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += kin.P[i, j] * rcm_velocity[j]
+        rate[i] += acc
+    return rate
 
 
 @kernel
 def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
-    s = inner(kin.d_z, p_R - kin.p_E) / length
+    s = _axial(kin, p_R) / length
     return min(1.0, max(0.0, s))
 
 
@@ -113,5 +152,17 @@ def closest_point(kin: Kinematics, s_star: float, length: float) -> tuple[Vec, V
 @kernel
 def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
     """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
-    J_w = np.ascontiguousarray(kin.J_E[:3])
-    return np.vstack((J_w, kin.J_E[3:] - skew(o_G) @ J_w))
+    S = skew(o_G)
+    J_E = kin.J_E
+    n = J_E.shape[1]
+    J_G = np.empty((6, n))
+    for j in range(n):
+        for i in range(3):
+            J_G[i, j] = J_E[i, j]
+    for i in range(3):
+        for j in range(n):
+            acc = 0.0
+            for k in range(3):
+                acc += S[i, k] * J_E[k, j]
+            J_G[i + 3, j] = J_E[i + 3, j] - acc
+    return J_G

@@ -96,12 +96,18 @@ class KinematicTerms(NamedTuple):
 @kernel
 def symmetrised(A_upper: Mat) -> Mat:
     """The symmetric matrix whose upper triangle is that of ``A_upper`` (Pinocchio fills only that one)."""
+    A = np.empty(A_upper.shape)
+    symmetrise_into(A, A_upper)
+    return A
+
+
+@kernel
+def symmetrise_into(A: Mat, A_upper: Mat) -> None:
+    """``A`` = :func:`symmetrised` ``(A_upper)``, written into ``A``."""
     n = A_upper.shape[0]
-    A = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             A[i, j] = A_upper[i, j] if i <= j else A_upper[j, i]
-    return A
 
 
 @kernel
@@ -110,17 +116,29 @@ def assemble_kinematics(
     p_C: Vec, R_C: Mat, J: Mat,
 ) -> Kinematics:
     """The tick's :class:`Kinematics` from Pinocchio's terms: M symmetrised, J_E = [J_ω; J_v] (eq 33),
-    the scope axis (eqs 16-17); every array copied."""
+    the scope axis (eqs 16-17); every array copied.
+
+    The arrays are disjoint views of one buffer: one allocation instead of fourteen (each costs about
+    as much as a small equation's arithmetic)."""
     n = q.shape[0]
-    M = symmetrised(M_upper)
-    J_E = np.empty((6, n))
+    buf = np.empty(4 * n + n * n + 6 * n + 4 * 12)
+    q_, dq_, nle_, g_ = buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[3 * n:4 * n]
+    at = 4 * n
+    M = buf[at:at + n * n].reshape((n, n))
+    at += n * n
+    J_E = buf[at:at + 6 * n].reshape((6, n))
+    at += 6 * n  # then four (3-vector, 3 x 3) pairs: {E}, {H}, {C} and the scope axis (d_z, P)
+    p_E_, R_E_ = buf[at:at + 3], buf[at + 3:at + 12].reshape((3, 3))
+    p_H_, R_H_ = buf[at + 12:at + 15], buf[at + 15:at + 24].reshape((3, 3))
+    p_C_, R_C_ = buf[at + 24:at + 27], buf[at + 27:at + 36].reshape((3, 3))
+    axis = ScopeAxis(p_E_, buf[at + 36:at + 39], buf[at + 39:at + 48].reshape((3, 3)))
+    q_[:], dq_[:], nle_[:], g_[:] = q, dq, nle, gravity
+    symmetrise_into(M, M_upper)
     J_E[:3] = J[3:]
     J_E[3:] = J[:3]
-    d_z, P = scope_axis(R_E)
-    return Kinematics(
-        q.copy(), dq.copy(), M, nle.copy(), gravity.copy(), p_E.copy(), R_E.copy(), J_E, p_H.copy(), R_H.copy(),
-        p_C.copy(), R_C.copy(), d_z, P,
-    )
+    R_E_[:], p_H_[:], R_H_[:], p_C_[:], R_C_[:] = R_E, p_H, R_H, p_C, R_C
+    fill_scope_axis(axis, R_E, p_E)
+    return Kinematics(q_, dq_, M, nle_, g_, p_E_, R_E_, J_E, p_H_, R_H_, p_C_, R_C_, axis.d_z, axis.P)
 
 
 @kernel
@@ -158,8 +176,8 @@ _F64 = np.dtype(np.float64)
 
 def _vector_arg(x: object, n: int, what: str) -> Vec:
     """``x`` as a C-contiguous float64 vector of length n (itself when it is one already)."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (n,) and x.flags.c_contiguous:
-        return x  # the common case, checked cheaply
+    if type(x) is np.ndarray and x.dtype is _F64 and x.ndim == 1 and len(x) == n and x.flags.c_contiguous:
+        return x  # the common case, checked cheaply (no shape tuple built)
     a = np.ascontiguousarray(x, dtype=np.float64)
     if a.shape != (n,):
         raise ValueError(f"{what} must be a vector of {n} values, got shape {a.shape}")
@@ -234,7 +252,8 @@ class RobotModel:
         self._q[:] = q
         self._dq[:] = dq
         M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C = self._views
-        return KinematicTerms(self._q, self._dq, M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C, J)
+        # tuple.__new__: the named tuple without its keyword-handling constructor (this runs every tick)
+        return tuple.__new__(KinematicTerms, (self._q, self._dq, M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C, J))
 
     def kinematics(self, q: Vec, dq: Vec) -> Kinematics:
         """Evaluate the model at (q, dq) (:meth:`terms`, :func:`assemble_kinematics`); fresh arrays."""

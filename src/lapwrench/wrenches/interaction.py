@@ -36,8 +36,12 @@ def interaction_wrench(force_H: Vec, torque_H: Vec, R_H: Mat, delta: float) -> t
 
     Only the axial torque and the three forces are kept: under the RCM the scope has four DOFs.
     """
-    moment = delta * torque_H[2] * np.ascontiguousarray(R_H[:, 2])
-    force = delta * matvec(R_H, force_H)
+    axial = delta * torque_H[2]
+    moment = np.empty(3)
+    force = matvec(R_H, force_H)
+    for i in range(3):
+        moment[i] = axial * R_H[i, 2]
+        force[i] = delta * force[i]
     return moment, force
 
 

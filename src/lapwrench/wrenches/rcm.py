@@ -12,7 +12,10 @@ from lapwrench.wrenches.base import Cue, TickContext
 @kernel
 def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     """Eq (14): F_r = -K_p e_R - K_d ė_R, with K_p = Kp I3 and K_d = Kd I3."""
-    return -Kp * e_R - Kd * e_R_rate
+    F = np.empty(3)
+    for i in range(3):
+        F[i] = -Kp * e_R[i] - Kd * e_R_rate[i]
+    return F
 
 
 class RcmCue(Cue):

@@ -10,7 +10,7 @@ import numpy as np
 from lapwrench.config import CameraConfig, Config, TrackingConfig
 from lapwrench.jit import kernel
 from lapwrench.shaping import sine_ramp
-from lapwrench.spatial import Mat, Vec, Wrench, inner, matvec
+from lapwrench.spatial import Mat, Vec, Wrench, cross3, inner
 from lapwrench.wrenches.base import Cue, TickContext
 
 
@@ -52,7 +52,15 @@ def tracking_force_magnitude(d: float, p: TrackingParams) -> float:
 @kernel
 def unit_depth_ray(u: float, v: float, p: TrackingParams, R_C: Mat) -> Vec:
     """Eq (11): P'_i = (u_i - u0)/f_x x_C + (v_i - v0)/f_y y_C + z_C, in {B}."""
-    return matvec(R_C, np.array([(u - p.u0) / p.fx, (v - p.v0) / p.fy, 1.0]))
+    x, y = (u - p.u0) / p.fx, (v - p.v0) / p.fy
+    ray = np.empty(3)
+    for i in range(3):
+        acc = 0.0  # R_C [x, y, 1], summed in matvec's order
+        acc += R_C[i, 0] * x
+        acc += R_C[i, 1] * y
+        acc += R_C[i, 2] * 1.0
+        ray[i] = acc
+    return ray
 
 
 @kernel
@@ -69,9 +77,19 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
     1 s on the virtual dynamics), out of the incision. ``printed`` stays available.
     Returns zeros when the ray is along z_C (the instrument sits on the principal point).
     """
-    w = ray - inner(ray, z_C) * z_C if variant == "image_plane" else np.cross(np.cross(z_C, ray), ray)
+    if variant == "image_plane":
+        along = inner(ray, z_C)
+        w = np.empty(3)
+        for i in range(3):
+            w[i] = ray[i] - along * z_C[i]
+    else:
+        w = cross3(cross3(z_C, ray), ray)
     n = math.sqrt(inner(w, w))
-    return w / n if n > 1e-12 else np.zeros(3)
+    if not n > 1e-12:
+        return np.zeros(3)
+    for i in range(3):
+        w[i] = w[i] / n
+    return w
 
 
 @kernel
@@ -80,14 +98,19 @@ def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
     scaled down to |F_c| <= F_sum_max when the sum exceeds it (a departure from the printed eq 8: the
     sum would otherwise grow with the number of boxes a detector returns; its direction is kept)."""
     F = np.zeros(3)
-    z_C = np.ascontiguousarray(R_C[:, 2])
+    z_C = R_C[:, 2]
     for i in range(points.shape[0]):
         u, v = points[i, 0], points[i, 1]
         mag = tracking_force_magnitude(pixel_distance(u, v, p.u0, p.v0), p)
         if mag > 0.0:
-            F += mag * tracking_direction(unit_depth_ray(u, v, p, R_C), z_C, p.direction)
+            V = tracking_direction(unit_depth_ray(u, v, p, R_C), z_C, p.direction)
+            for k in range(3):
+                F[k] += mag * V[k]
     norm = math.sqrt(inner(F, F))
-    return F * (p.F_sum_max / norm) if norm > p.F_sum_max else F
+    if norm > p.F_sum_max:
+        for k in range(3):
+            F[k] = F[k] * (p.F_sum_max / norm)
+    return F
 
 
 class TrackingCue(Cue):
