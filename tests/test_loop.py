@@ -10,6 +10,7 @@ import pytest
 from lapwrench.config import load
 from lapwrench.controller import Controller
 from lapwrench.hardware.runner import ControlLoop as HardwareLoop
+from lapwrench.inputs import Reading
 from lapwrench.loop import ControlLoop
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, TactileReading
@@ -101,3 +102,21 @@ def test_two_sources_of_one_kind_are_refused() -> None:
     ft = Observable("ft", lambda t: None, update_interval=DT, max_age=0.01)
     with pytest.raises(ValueError, match="one source per kind"):
         ControlLoop(VirtualRobot("panda", DEFAULT_Q0, DT), ctrl, sup, [ft, ft])
+
+
+def test_registered_inputs_reach_the_frame_and_each_freshness_change_is_one_event() -> None:
+    loop, clock = _loop(wall_deadlines=False)
+    alive = [True]
+    probe = Observable("probe", lambda t: Reading(np.array([t]), t) if alive[0] else None, update_interval=DT,
+                       max_age=0.003)
+    loop.sources.append(probe)
+    first = _cycles(loop, clock, 5)
+    assert all(c.frame.extra["probe"].value[0] == c.frame.time for c in first)
+    alive[0] = False
+    silent = _cycles(loop, clock, 10)
+    alive[0] = True
+    back = _cycles(loop, clock, 5)
+    assert silent[-1].frame.extra["probe"] is None and back[-1].frame.extra["probe"] is not None
+    kinds = [e.kind for c in first + silent + back for e in c.events if e.kind in ("input_stale", "input_fresh")]
+    assert kinds == ["input_stale", "input_fresh"]  # once each, not every cycle
+    assert back[-1].frame.ft is not None and back[-1].frame.tactile is not None

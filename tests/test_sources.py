@@ -108,3 +108,19 @@ def test_an_empty_detection_is_a_reading_not_an_absence() -> None:
     src.poll(0.0)
     r = fresh(src, 0.0)
     assert r is not None and r.points.shape == (0, 2)
+
+
+def test_without_delay_each_sample_is_the_latest_at_once_and_in_order() -> None:
+    src = Observable("ft", _ft, update_interval=DT, max_age=0.1)
+    for k in range(5):
+        src.poll(k * DT)
+        assert src.latest() is not None and src.latest().stamp == k * DT
+    late = Observable("ft", _ft, update_interval=DT, delay=0.003, max_age=0.1)
+    stamps = []
+    for k in range(10):
+        if k == 4:
+            late.delay = 0.0  # the samples in flight still arrive first
+        late.poll(k * DT)
+        r = late.latest()
+        stamps.append(None if r is None else round(r.stamp / DT))
+    assert stamps == [None, None, None, 0, 1, 2, 6, 7, 8, 9]  # first in, first out, then straight through

@@ -229,16 +229,26 @@ class ControlLoop:
             return None
 
     def _frame(self, t: float, reading: RobotReading) -> SensorFrame:
-        readings: dict[str, Any] = {}
+        """Poll every source and gather the fresh readings: the built-in kinds in their fields, the
+        rest (registered inputs) in ``extra`` by name."""
+        ft = tactile = instruments = None
+        extra: dict[str, Any] = {}
+        was_fresh = self._fresh
         for s in self.sources:
             s.poll(t)
             r = fresh(s, t)
-            self._note_freshness(t, s.kind, r is not None)
-            readings[s.kind] = r
-        return SensorFrame(
-            time=t, ft=readings.pop("ft", None), tactile=readings.pop("tactile", None),
-            instruments=readings.pop("instruments", None), robot=reading, extra=readings,  # the rest: registered inputs
-        )
+            kind = s.kind
+            if was_fresh.get(kind) is not (r is not None):  # a change (or the first cycle): note it
+                self._note_freshness(t, kind, r is not None)
+            if kind == "ft":
+                ft = r
+            elif kind == "tactile":
+                tactile = r
+            elif kind == "instruments":
+                instruments = r
+            else:
+                extra[kind] = r
+        return SensorFrame(time=t, ft=ft, tactile=tactile, instruments=instruments, robot=reading, extra=extra)
 
     def _note_freshness(self, t: float, name: str, is_fresh: bool) -> None:
         was = self._fresh.get(name)

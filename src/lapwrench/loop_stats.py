@@ -11,7 +11,7 @@ module holds only what runs a cycle.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -81,10 +81,10 @@ class Growable:
         return self.a[: self.n].copy()
 
 
-@dataclass
-class Cycle:
+class Cycle(NamedTuple):
     """One cycle's outcome: the frame the controller saw, its result (None after a failed tick),
-    the measured scope, the command sent, and the compute time (s)."""
+    the measured scope, the command sent, and the compute time (s). A named tuple: one is made every
+    control period."""
 
     k: int
     frame: SensorFrame

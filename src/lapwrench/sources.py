@@ -98,16 +98,23 @@ class Observable:
         self._latest: R | None = None
 
     def poll(self, now: float) -> None:
-        """Take a sample if one is due (at most one per call), then deliver those that have arrived."""
+        """Take a sample if one is due (at most one per call), then deliver those that have arrived.
+
+        Without a delay a sample arrives at once: it becomes the latest directly (nothing is ever in
+        flight then), the same outcome without the queue's work at every control period."""
         if now >= self._next - 1e-12:
             self._next = (now if self._next == -math.inf else self._next) + self.update_interval
             value = self.read(now)
             if value is not None and self.corruptor is not None:
                 value = self.corruptor(value, self.rng)
             if value is not None:
+                if self.delay == 0.0 and not self._in_flight:
+                    self._latest = value
+                    return
                 self._in_flight.append((now + self.delay, value))
-        while self._in_flight and self._in_flight[0][0] <= now + 1e-12:
-            self._latest = self._in_flight.popleft()[1]
+        in_flight = self._in_flight
+        while in_flight and in_flight[0][0] <= now + 1e-12:
+            self._latest = in_flight.popleft()[1]
 
     def latest(self) -> R | None:
         return self._latest

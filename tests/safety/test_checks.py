@@ -8,7 +8,13 @@ import pytest
 
 from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
 from lapwrench.robot.model import RobotModel
-from lapwrench.safety.checks import command_violation, measure_scope, nearest_limit
+from lapwrench.safety.checks import (
+    accept_command,
+    command_violation,
+    measure_scope,
+    measured_joints_room,
+    nearest_limit,
+)
 from lapwrench.virtual import DEFAULT_Q0
 
 
@@ -91,3 +97,44 @@ def test_nearest_limit_is_the_joint_with_the_least_room() -> None:
     assert int(joint) == 1 and room == pytest.approx(0.1)
     joint, room = nearest_limit(np.array([-0.95, 0.9, -0.2]), np.full(3, -1.0), np.full(3, 1.0))
     assert int(joint) == 0 and room == pytest.approx(0.05)
+
+
+def _accept(q: list[float], history: np.ndarray) -> tuple:
+    code, joint, value = accept_command(np.array(q), history, LO, HI, 1e-6, V_MAX, A_MAX, J_MAX, DT)
+    return int(code), int(joint), float(value)
+
+
+def test_an_accepted_command_becomes_the_history_as_libfranka_differentiates_it() -> None:
+    history = np.array([[0.1, -0.2], [0.5, 0.0], [2.0, 0.0]])  # q, v, a of the last command
+    q = [0.1 + 0.5 * DT + 1e-7, -0.2]
+    assert _accept(q, history) == (0, 0, 0.0)
+    v = (np.array(q) - [0.1, -0.2]) / DT
+    a = (v - [0.5, 0.0]) / DT
+    np.testing.assert_array_equal(history, [q, v, a])  # bit for bit numpy's backward differences
+
+
+def test_a_rejected_command_leaves_the_history_and_says_what_command_violation_says() -> None:
+    cases = [([0.0, 1.1], [0.0, 1.1]), ([0.0, 3.0 * DT], [0.0, 0.0])]  # position; velocity
+    for q, q_prev in cases:
+        history = np.array([q_prev, [0.0, 3.0 if q[1] < 0.5 else 0.0], [0.0, 0.0]])
+        before = history.copy()
+        got = _accept(q, history)
+        assert got[0] in (1, 2) and got == violation(q, list(history[0]), list(history[1]), list(history[2]))
+        np.testing.assert_array_equal(history, before)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_non_finite_command_is_refused_and_named(bad: float) -> None:
+    history = np.zeros((3, 2))
+    code, joint, _ = _accept([0.0, bad], history)
+    assert (code, joint) == (5, 1)
+    assert not history.any()
+
+
+def test_measured_joints_room_is_nearest_limit_for_finite_joints_only() -> None:
+    lo, hi = np.full(3, -1.0), np.full(3, 1.0)
+    q = np.array([0.0, 0.9, -0.2])
+    finite, joint, room = measured_joints_room(q, lo, hi)
+    assert finite and (joint, room) == nearest_limit(q, lo, hi)
+    finite, _, _ = measured_joints_room(np.array([0.0, np.nan, 0.0]), lo, hi)
+    assert not finite

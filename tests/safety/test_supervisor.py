@@ -46,6 +46,22 @@ def test_valid_commands_pass_unchanged(limits) -> None:
     assert s.state is SupervisorState.RUNNING and not s.alarm
 
 
+def test_every_form_of_a_command_is_checked_and_remembered_alike(limits) -> None:
+    """float64 arrays take a compiled path of their own: lists and strided views give the same commands
+    and the same history, and the command handed back is the caller's own copy."""
+    fast, slow, strided = started(limits), started(limits), started(limits)
+    q = DEFAULT_Q0.copy()
+    for k in range(40):
+        q = q + 2e-7 * k * np.arange(1, 8)
+        out = fast.filter(k * DT, q)
+        assert np.array_equal(out, slow.filter(k * DT, list(q)))
+        assert np.array_equal(out, strided.filter(k * DT, np.repeat(q, 2)[::2]))
+        out += 1.0  # the caller's copy: the supervisor's history does not move with it
+    for a, b, c in zip(fast.command_state, slow.command_state, strided.command_state, strict=True):
+        assert np.array_equal(a, b) and np.array_equal(a, c)
+    assert np.array_equal(fast.command_state[0], q) and not fast.alarm
+
+
 @pytest.mark.parametrize(
     ("bad", "kind"),
     [

@@ -1,4 +1,5 @@
-"""ClosedLoop's supervisor: it watches measured state, and a failing controller tick becomes a hold."""
+"""ClosedLoop's supervisor: it watches measured state, and a failing controller tick becomes a hold;
+its records of a run."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import pytest
 from lapwrench.config import load
 from lapwrench.rcm.geometry import rcm_error
 from lapwrench.robot.limits import limit_usage
-from lapwrench.sim.loop import ClosedLoop, SafetyStopError
+from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
 from lapwrench.sim.world import CONTROL_DT
 
 
@@ -107,3 +108,37 @@ def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_superviso
     assert ctrl.stopping
     assert_at_rest_inside_limits(loop, sent)
     assert loop.physical_rcm_error() < 2e-3
+
+
+def test_a_record_holds_the_worlds_readings_of_that_tick() -> None:
+    """Each row of the trace is the world as it read after that tick (the depth from the same poses
+    as p_E, d_z and the incision), and every running cue's wrench."""
+    loop = ClosedLoop(load(), seed=0)
+    trace = Trace()
+    w = loop.world
+    for k in range(20):
+        w.set_hand_wrench(force=[0.0, 2.0 * k, 0.0])
+        res = loop.step(30.0)
+        loop.record(trace, res, tick=k)
+        assert trace["insertion_depth"][-1] == w.insertion_depth()
+        assert trace["rcm_error_phys"][-1] == loop.physical_rcm_error()
+        assert np.array_equal(trace["contact_force"][-1], w.contact_force())
+        assert np.array_equal(trace["hand_force"][-1], [0.0, 2.0 * k, 0.0])
+    assert list(trace["tick"]) == list(range(20)) and len(trace["t"]) == 20
+    assert "cue:interaction" in trace and trace["cue:interaction"].shape == (20, 6)
+
+
+def test_loops_of_one_configuration_run_alike_and_apart() -> None:
+    """Loops of one configuration share its compiled scene, never their state: a loop stepped after
+    another ran repeats its run exactly, and stepping it leaves the first one's world as it was."""
+    cfg = load()
+    runs = []
+    for _ in range(2):
+        loop = ClosedLoop(cfg, seed=1)
+        loop.world.set_hand_wrench(force=[0.0, 6.0, 0.0])
+        runs.append((loop, [loop.step(30.0).q_ref for _ in range(50)]))
+    (first, a), (second, b) = runs
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    q = first.world.q
+    second.step(30.0)
+    assert np.array_equal(first.world.q, q) and first.world is not second.world

@@ -139,3 +139,23 @@ def test_torque_noise_is_one_draw_per_tick_of_the_seeded_stream(world: SimWorld)
         tau = world.joint_torque_tick_mean()
         robot.read()
         np.testing.assert_array_equal(robot.tau_J, (tau + bias) + stream.normal(0.0, 0.05, 7))
+
+
+def test_a_shared_model_gives_the_same_estimate_as_its_own(panda_scene: Scene) -> None:
+    """The estimator evaluates on a workspace of its own: a model the caller also evaluates (as the
+    closed loop's controller does) gives the same readings, bit for bit."""
+    shared = RobotModel("panda", panda_scene.config.scope)
+    est = ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=TORQUE_BIAS, seed=4)
+    worlds = SimWorld(panda_scene), SimWorld(panda_scene)
+    robots = SimRobot(worlds[0], estimate=est), SimRobot(worlds[1], estimate=est, model=shared)
+    assert robots[1].model is shared
+    for r in robots:
+        r.connect()
+    rng = np.random.default_rng(2)
+    for k in range(200):
+        for w, r in zip(worlds, robots, strict=True):
+            w.set_hand_wrench(force=[5.0 * np.sin(0.02 * k), 2.0, 0.0])
+            r.command(panda_scene.q0 + 0.01 * np.sin(0.01 * k))
+        shared.kinematics(rng.uniform(-1, 1, 7), rng.normal(size=7))  # the caller's own evaluations
+        a, b = (r.read() for r in robots)
+        assert np.array_equal(a.external_force, b.external_force) and np.array_equal(a.q, b.q)

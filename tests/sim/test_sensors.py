@@ -10,6 +10,7 @@ import pytest
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
 from lapwrench.sim.sensors import (
+    NOISE_BLOCK_SAMPLES,
     ExternalForceObserver,
     ForceTorqueNoise,
     GripModel,
@@ -127,8 +128,9 @@ def test_compiled_observer_matches_the_numpy_one() -> None:
 
 
 def test_ft_reading_is_the_documented_formula(world: SimWorld) -> None:
-    """Six cached sensordata addresses and one draw of six normals: the same values, bit for bit, as
-    the sensors' force and torque read by name with a draw of three per part."""
+    """Six cached sensordata addresses and normals drawn ahead in blocks: the same values, bit for bit,
+    as the sensors' force and torque read by name with a draw of three per part and sample, across
+    the end of a block."""
     world.reset()
     world.set_hand_wrench(force=[3.0, -2.0, 1.0], torque=[0.05, -0.02, 0.1])
     _hold(world, 20)
@@ -136,7 +138,7 @@ def test_ft_reading_is_the_documented_formula(world: SimWorld) -> None:
     ft = SimForceTorqueSensor(world, noise, seed=5)
     rng = np.random.default_rng(5)
     m, d = world.model, world.data
-    for k in range(5):
+    for k in range(NOISE_BLOCK_SAMPLES + 5):
         fa, ma = m.sensor("handle_ft_force").adr[0], m.sensor("handle_ft_torque").adr[0]
         expected = -np.concatenate([d.sensordata[fa : fa + 3], d.sensordata[ma : ma + 3]])
         expected[:3] += np.asarray(noise.force_bias) + noise.force_sigma * rng.standard_normal(3)

@@ -41,7 +41,14 @@ import numpy as np
 
 from lapwrench.jit import bind
 from lapwrench.robot.limits import JointLimits
-from lapwrench.safety.checks import MeasuredScope, command_violation, measure_scope, nearest_limit
+from lapwrench.safety.checks import (
+    MeasuredScope,
+    accept_command,
+    command_violation,
+    measure_scope,
+    measured_joints_room,
+    nearest_limit,
+)
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.safety.watches import CONTROLLER_STOP_TIMEOUT, SupervisorWatches
 from lapwrench.spatial import Vec
@@ -82,16 +89,19 @@ class SafetySupervisor(SupervisorWatches):
         self._stop_j = stop.jerk
         self.replaced_commands = 0
         self.n_joints = int(limits.position_lower.shape[0])
-        self._q = np.zeros(self.n_joints)
-        self._v = np.zeros(self.n_joints)
-        self._a = np.zeros(self.n_joints)
+        # The command history as libfranka differentiates it: rows q, v, a of the last command sent,
+        # updated in place (``_q``, ``_v``, ``_a`` are views of its rows).
+        self._history = np.zeros((3, self.n_joints))
+        self._q, self._v, self._a = self._history
         self._started = False
         # The compiled checks bound to their argument types now (:func:`lapwrench.jit.bind`: no dispatch
         # per call, nothing compiles in the first cycle); every call passes C-contiguous float64 vectors.
         z = np.zeros(self.n_joints)
-        args = (z, z, z, z, self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
-        self._command_violation = bind(command_violation, *args)
+        limits_args = (self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
+        self._command_violation = bind(command_violation, z, z, z, z, *limits_args)
+        self._accept_command = bind(accept_command, z, np.zeros((3, self.n_joints)), *limits_args)
         self._nearest_limit = bind(nearest_limit, z, self._lo, self._hi)
+        self._joints_room = bind(measured_joints_room, z, self._lo, self._hi)
 
     # -- state --------------------------------------------------------------------------------
     def start(self, q0: Vec, time: float = 0.0) -> None:
@@ -100,7 +110,8 @@ class SafetySupervisor(SupervisorWatches):
         n = self.n_joints
         if q0.shape != (n,) or not np.all(np.isfinite(q0)):
             raise ValueError(f"supervisor start pose must be {n} finite joint positions")
-        self._q, self._v, self._a = q0.copy(), np.zeros(n), np.zeros(n)
+        self._history[0] = q0
+        self._history[1:] = 0.0
         self.state = SupervisorState.RUNNING
         self.alarm, self.alarm_reason = False, None
         self.consecutive_misses = 0
@@ -135,8 +146,12 @@ class SafetySupervisor(SupervisorWatches):
             q, self._q, self._v, self._a, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
             self._a_max, self._j_max, self.dt,
         )
-        if code == 0:
-            return None
+        return None if code == 0 else self._violation(q, code, j, value)
+
+    def _violation(self, q: np.ndarray, code: int, j: int, value: float) -> tuple[str, str]:
+        """(kind, message) of a violation code of :func:`accept_command` for the command ``q``."""
+        if code == 5:
+            return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"
         if code == 1:
             return "command_position", (
                 f"joint {j + 1} command {q[j]:.4f} rad outside [{self._lo[j]:.4f}, {self._hi[j]:.4f}]"
@@ -151,9 +166,9 @@ class SafetySupervisor(SupervisorWatches):
     def _accept(self, q: Vec) -> None:
         dt = self.dt
         v = (q - self._q) / dt
-        self._a = (v - self._v) / dt
-        self._v = v
-        self._q = q.copy()
+        self._a[:] = (v - self._v) / dt
+        self._v[:] = v
+        self._q[:] = q
 
     def _stop_step(self) -> Vec:
         """Next sample of the jerk-limited stop from the current command state."""
@@ -173,7 +188,7 @@ class SafetySupervisor(SupervisorWatches):
             a_new = np.where(crossing, np.clip(-v / dt, a - jdt, a + jdt), a_new)
             v_new = v + a_new * dt
         q_new = self._q + v_new * dt
-        self._a, self._v, self._q = a_new, v_new, q_new
+        self._a[:], self._v[:], self._q[:] = a_new, v_new, q_new
         if (
             np.max(np.abs(v_new)) < self.cfg.rest_velocity
             and np.max(np.abs(a_new)) <= np.min(jdt)
@@ -229,11 +244,21 @@ class SafetySupervisor(SupervisorWatches):
             return q
         if self.state is SupervisorState.STOPPING:
             return self._stop_step()
-        problem = self.check_command(q_cmd)
-        if problem is None:
-            q = np.asarray(q_cmd, dtype=float)
-            self._accept(q)
-            return q.copy()
+        usual = type(q_cmd) is np.ndarray and q_cmd.dtype == np.float64 and q_cmd.flags.c_contiguous
+        if usual and q_cmd.shape == self._q.shape:  # checked and accepted in one compiled call
+            code, j, value = self._accept_command(
+                q_cmd, self._history, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
+                self._a_max, self._j_max, self.dt,
+            )
+            if code == 0:
+                return q_cmd.copy()
+            problem = self._violation(q_cmd, code, j, value)
+        else:
+            problem = self.check_command(q_cmd)
+            if problem is None:
+                q = np.asarray(q_cmd, dtype=float)
+                self._accept(q)
+                return q.copy()
         kind, message = problem
         self.replaced_commands += 1
         self.raise_alarm(time, kind, f"{message}; replaced by a stop")

@@ -25,7 +25,7 @@ from collections import deque
 
 import numpy as np
 
-from lapwrench.safety.checks import nearest_limit
+from lapwrench.safety.checks import measured_joints_room, nearest_limit
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.spatial import Vec
 
@@ -53,7 +53,8 @@ class SupervisorWatches:
         self.cfg = config
         self._lo = np.ascontiguousarray(lo, dtype=float)  # the compiled checks' argument type
         self._hi = np.ascontiguousarray(hi, dtype=float)
-        self._nearest_limit = nearest_limit  # the subclass binds it to its argument types
+        self._nearest_limit = nearest_limit  # the subclass binds these to their argument types
+        self._joints_room = measured_joints_room
         self.events: deque[SupervisorEvent] = deque(maxlen=config.max_events)
         self.pending: list[SupervisorEvent] = []
         self.state = SupervisorState.HOLDING
@@ -110,11 +111,13 @@ class SupervisorWatches:
 
     def _watch_joints(self, time: float, q_measured: Vec) -> None:
         c = self.cfg
-        qm = np.ascontiguousarray(q_measured, dtype=np.float64)
-        if qm.shape != self._lo.shape or not math.isfinite(qm.sum()):
+        qm = q_measured
+        if not (type(qm) is np.ndarray and qm.dtype == np.float64 and qm.flags.c_contiguous):
+            qm = np.ascontiguousarray(q_measured, dtype=np.float64)
+        finite, j, room = self._joints_room(qm, self._lo, self._hi) if qm.shape == self._lo.shape else (False, 0, 0.0)
+        if not finite:
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return
-        j, room = self._nearest_limit(qm, self._lo, self._hi)
         if room < c.joint_stop_margin:
             if self.state is SupervisorState.RUNNING:
                 self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")

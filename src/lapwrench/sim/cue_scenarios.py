@@ -114,15 +114,19 @@ def zoom_run(label: str, cfg: Config, opts: ScenarioOptions, band: tuple[float, 
     """One run of the zoom script. Its tracking time: from ``ZOOM_SETTLE_S`` on, while the detector
     reports both instruments; ``in_band_fraction`` is the share of it with their detected spread in
     the band (``tip_in_band_fraction``: the same for the projected tips, from the simulator)."""
-    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, world=opts.world)
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, world=opts.world,
+                      detector_threads=opts.detector_threads, render_in_background=opts.render_in_background)
     trace = Trace()
     duration = ZOOM_SCRIPT[-1][0] * opts.time_scale
     t0 = time.perf_counter()
-    while loop.t < duration:
-        _place_instruments(loop, loop.t, opts.time_scale)
-        res = loop.step(0.0)
-        loop.record(trace, res, spread=seen_spread(loop), tip_spread=true_spread(loop))
-        _progress(opts, loop)
+    try:
+        while loop.t < duration:
+            _place_instruments(loop, loop.t, opts.time_scale)
+            res = loop.step(0.0)
+            loop.record(trace, res, spread=seen_spread(loop), tip_spread=true_spread(loop))
+            _progress(opts, loop)
+    finally:
+        loop.close()  # the render process (render_in_background) and the GL contexts end with the run
     m = run_metrics(loop, trace, time.perf_counter() - t0)
     s, t, start = trace["spread"], trace["t"], ZOOM_SETTLE_S * opts.time_scale
     m["tracking_time_s"], m["in_band_fraction"] = _band_share(s, t, start, band)

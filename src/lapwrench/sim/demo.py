@@ -10,19 +10,13 @@ report.
 from __future__ import annotations
 
 import contextlib
-import gc
-import multiprocessing as mp
 import os
 import platform
-import signal
 import time
 import traceback
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
-from queue import Empty
 from types import SimpleNamespace
-from typing import Any
 
 import mujoco
 
@@ -30,18 +24,12 @@ from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import cue_scenarios, report
-from lapwrench.sim.loop import SafetyStopError
-from lapwrench.sim.results import ScenarioOptions, ScenarioResult
-from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, needle_search, scenarios_for
-from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError
+from lapwrench.sim.demo_tasks import PRINTED_DAMPING, TRACKING_SCENARIOS, DemoError, run_tasks
+from lapwrench.sim.results import ScenarioResult
+from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, scenarios_for
+from lapwrench.sim.world import CONTROL_DT
 
-TRACKING_SCENARIOS = ("needle-search", "workflow")
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits
-
-
-class DemoError(RuntimeError):
-    """A bad demo input, reported before any simulation starts."""
-
 
 @dataclass(frozen=True)
 class DemoPlan:
@@ -156,7 +144,7 @@ def _check_detector(spec: str, cfg: config_mod.Config) -> None:
     if spec == "projected":
         return
     from lapwrench.perception import PerceptionError
-    from lapwrench.sim.loop import make_detector
+    from lapwrench.sim.detectors import make_detector
 
     try:
         make_detector(spec, SimpleNamespace(n_instruments=1), cfg)  # type: ignore[arg-type]
@@ -164,130 +152,6 @@ def _check_detector(spec: str, cfg: config_mod.Config) -> None:
         detail = " ".join(str(exc).split())
         detail = detail if len(detail) <= 240 else detail[:237] + "..."
         raise DemoError(f"detector {spec[:60]!r} cannot be used: {detail}") from exc
-
-
-PRINTED_DAMPING = "needle-search, printed damping"
-
-
-def _init_worker(queue: Any) -> None:
-    global _PROGRESS
-    _PROGRESS = queue
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
-
-
-_PROGRESS: Any = None
-
-
-def _task(name: str, plan: DemoPlan) -> tuple[str, ScenarioResult | str, str | None]:
-    """One scenario (or the printed-damping check) in a worker: (name, result or check text, error)."""
-
-    def progress(dt: float) -> None:
-        if _PROGRESS is not None:
-            _PROGRESS.put(dt)
-
-    opts = ScenarioOptions(
-        seed=plan.seed,
-        time_scale=plan.time_scale,
-        progress=progress,
-        video_dir=plan.out if plan.video and name in TRACKING_SCENARIOS else None,
-        detector=plan.detector,
-    )
-    # The runs keep millions of small objects (the per-tick traces) and make no reference cycles:
-    # the cyclic garbage collector would only scan them, in pauses of several ms inside the loop.
-    gc_was_enabled = gc.isenabled()
-    gc.disable()
-    try:
-        if name == PRINTED_DAMPING:
-            return name, _printed_damping_check(opts, plan.robot), None
-        return name, SCENARIOS[name](plan.configs[name], opts), None
-    except (SimulationUnstableError, SafetyStopError) as exc:
-        return name, "", f"simulation of '{name}' stopped: {exc}. No report was written."
-    finally:
-        if gc_was_enabled:
-            gc.enable()
-
-
-def _run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, ScenarioResult | str]:
-    """Run the tasks on ``plan.workers`` processes (longest first), or in this process with one worker."""
-    global _PROGRESS
-    out: dict[str, ScenarioResult | str] = {}
-    if plan.workers <= 1:
-        _PROGRESS = _BarFeed(bar)
-        try:
-            for name in names:
-                bar.set_postfix_str(name)
-                try:
-                    _, res, err = _task(name, plan)
-                except Exception as exc:  # as from a worker: one line, FAILED.txt (with the traceback)
-                    raise DemoError(f"scenario '{name}' failed: {type(exc).__name__}: {exc}") from exc
-                if err:
-                    raise DemoError(err)
-                out[name] = res
-        finally:
-            _PROGRESS = None
-        return out
-    from lapwrench.controller import Controller
-
-    Controller(plan.configs[names[0]] if names[0] in plan.configs else config_mod.load())  # compile once, here:
-    # the workers then load numba's cache instead of each compiling the tick (a minute on a fresh clone)
-    ctx = mp.get_context("spawn")  # no fork of a process holding MuJoCo/EGL and numba state
-    queue = ctx.Queue()
-    pool = ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,))
-    try:
-        return _collect(pool, plan, names, queue, bar, out)
-    except BaseException:  # Ctrl-C or a failed scenario: stop the other workers now, not at their end
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    finally:
-        pool.shutdown(wait=True)
-
-
-def _collect(
-    pool: ProcessPoolExecutor, plan: DemoPlan, names: list[str], queue: Any, bar: Any,
-    out: dict[str, ScenarioResult | str],
-) -> dict[str, ScenarioResult | str]:
-    """Submit the tasks longest first and gather their results, feeding the progress bar."""
-    order = sorted(names, key=lambda n: -SIM_SECONDS.get(n, 15.0))
-    names_of = {pool.submit(_task, n, plan): n for n in order}
-    pending = set(names_of)
-    bar.set_postfix_str(f"{plan.workers} workers")
-    while pending:
-        done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
-        _drain(queue, bar)
-        for f in done:
-            try:
-                name, res, err = f.result()
-            except Exception as exc:  # a worker that crashed or raised something unexpected
-                name, res = names_of[f], ""
-                err = f"scenario '{name}' failed in its worker process: {type(exc).__name__}: {exc}"
-            if err:
-                for p in pending:
-                    p.cancel()
-                raise DemoError(err)
-            out[name] = res
-    _drain(queue, bar)
-    return out
-
-
-class _BarFeed:
-    """The progress queue of the one-process case: updates the bar directly."""
-
-    def __init__(self, bar: Any) -> None:
-        self.bar = bar
-
-    def put(self, dt: float) -> None:
-        self.bar.update(max(0.0, min(dt, self.bar.total - self.bar.n)))
-
-
-def _drain(queue: Any, bar: Any) -> None:
-    feed = _BarFeed(bar)
-    while True:
-        try:
-            feed.put(queue.get_nowait())
-        except Empty:
-            return
 
 
 def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]:
@@ -301,7 +165,7 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         config_mod.dump(cfg, out / "configs" / f"{name}.yaml")
     total = sum(SIM_SECONDS[n] for n in plan.scenarios) * plan.time_scale
     if plan.printed_damping_check:
-        total += 15.0 * plan.time_scale
+        total += SIM_SECONDS["needle-search"] * plan.time_scale  # the check is a needle search
     bar = tqdm(
         total=round(total, 1),
         unit="sim s",
@@ -313,7 +177,7 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
     t0 = time.perf_counter()
     names = list(plan.scenarios) + ([PRINTED_DAMPING] if plan.printed_damping_check else [])
     try:
-        done = _run_tasks(plan, names, bar)
+        done = run_tasks(plan, names, bar)
     except (DemoError, KeyboardInterrupt) as exc:
         bar.close()
         _write_failed(out, exc)
@@ -370,28 +234,6 @@ def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) ->
     if (out / f"{name}.mp4").exists():
         figs.append(f"{name}.mp4")
     return figs
-
-
-def _printed_damping_check(opts: ScenarioOptions, robot: str) -> str:
-    """Needle search on ``robot`` with the damping table exactly as printed (one k_t for every cue,
-    k_f = 2), to show why the defaults depart from it."""
-    cfg = config_mod.load().replace(robot={"kind": robot}, viscous={"k_f": 2.0, "k_t_unguided": 150.0})
-    try:
-        res = needle_search(cfg, opts)
-    except SimulationUnstableError as exc:
-        return (
-            f"Needle search with the printed k_t = 150 N m s and k_f = 2 N s/m: the run stopped at "
-            f"t = {exc.time:.2f} s ({exc.quantity} = {exc.value}): the nearly undamped insertion axis let the "
-            "scope slide out of the trocar while the hand swept the view. The defaults therefore use k_f = 150 N s/m "
-            "and give the tracking cue its own k_t_unguided = 2 N m s (the printed k_t = 150 stays for the hand)."
-        )
-    m = res.metrics
-    median = m.get("tracking_error_median_px")
-    tracking = "no instrument tracked" if median is None else f"tracking error median {median:.0f} px"
-    return (
-        "Needle search with the printed damping completed (the envelope's depth walls now keep the scope in): "
-        f"RCM max {m['rcm_error_max_mm']:.2f} mm, {tracking}, insertion drift {m['insertion_drift_mm']:.1f} mm."
-    )
 
 
 def _instrument_sources(results: dict[str, ScenarioResult]) -> str:

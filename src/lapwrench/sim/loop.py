@@ -3,12 +3,14 @@
 Everything the controller sees comes from a simulated sensor (F/T, tactile array, joint-torque
 based external force, camera). Instrument image points come from a detector run on the rendered
 25 fps frames, asynchronously with a modelled latency (the shipped YOLO model by default), or —
-when asked for — from the projection of the simulator's known instrument geometry (reported as such).
+when asked for — from the projection of the simulator's known instrument geometry (reported as such);
+the detectors are built in :mod:`lapwrench.sim.detectors`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -19,22 +21,20 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.loop import ControlLoop
 from lapwrench.loop_stats import Cycle
 from lapwrench.perception.async_detect import SimulatedAsyncDetector
-from lapwrench.perception.detection import Detection, Detector
 from lapwrench.robot.arms import arm_spec
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import InstrumentObservation
 from lapwrench.sim.camera import NO_IMAGE, PendingFrame, SimCamera, frame_hold
+from lapwrench.sim.detectors import make_detector
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
-from lapwrench.sim.scene.build import build_scene
+from lapwrench.sim.scene.build import Scene, build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.sensors import SimForceTorqueSensor, TactileGripModel
 from lapwrench.sim.variation import CorruptedDetector, WorldVariation
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 from lapwrench.sources import Observable, Source, simulated_input
 from lapwrench.wrenches.registry import input_specs
-
-DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
 
 # Franka-like joint torque sensing imperfections behind the external force estimate: white noise, and
 # a constant bias per joint from the robot's spec (ClosedLoop uses its arm's; TORQUE_BIAS is the Panda's).
@@ -51,57 +51,12 @@ class SafetyStopError(RuntimeError):
         super().__init__(f"safety supervisor stopped the robot at t = {time:.3f} s: {reason}")
 
 
-class ProjectedInstruments:
-    """Ground-truth stand-in for a detector: the instrument tips projected through the camera.
-
-    A :class:`~lapwrench.perception.detection.Detector` that ignores the image. Used only when
-    asked for (``detector="projected"``); the report says so. Tips outside the image or behind the
-    camera are not detected.
-    """
-
-    name = "projected simulator geometry (no detector)"
-
-    def __init__(self, world: SimWorld, width: int, height: int) -> None:
-        self.world = world
-        self.width = width
-        self.height = height
-
-    def detect(self, image: np.ndarray) -> list[Detection]:
-        tips = np.array([self.world.instrument_tip(i) for i in range(self.world.n_instruments)])
-        uv, depth = self.world.project_to_image(tips)
-        out = []
-        for (u, v), z in zip(uv, depth, strict=True):
-            if z > 0.005 and 0 <= u < self.width and 0 <= v < self.height:
-                box = (max(0.0, u - 12), max(0.0, v - 12), min(self.width, u + 12), min(self.height, v + 12))
-                out.append(Detection(box=box, score=1.0, class_id=0, point=(float(u), float(v))))
-        return out
-
-
-def make_detector(spec: str, world: SimWorld, cfg: Config) -> tuple[Detector, str]:
-    """The instrument detector of a simulated run and its name for the report.
-
-    ``spec``: ``"shipped"`` (the packaged YOLO ONNX model), ``"classical"``, a path to a ``.onnx``
-    or ``.pt`` model, or ``"projected"`` (simulator geometry, no image processing).
-    """
-    if spec == "projected":
-        det = ProjectedInstruments(world, cfg.camera.width, cfg.camera.height)
-        return det, det.name
-    from lapwrench import perception
-
-    # One instrument per port: keep that many of the most confident detections above 0.5.
-    det_cfg = perception.DetectorConfig(
-        frame_size=(cfg.camera.width, cfg.camera.height),
-        color_order="rgb",
-        score_threshold=DETECTION_SCORE,
-        max_detections=world.n_instruments,
-    )
-    if spec == "shipped":
-        det = perception.shipped_detector(det_cfg)
-        flip = ", mirrored second pass" if det.test_time_flip else ""
-        return det, f"YOLO ONNX detector {perception.SHIPPED_MODEL.name}{flip} on the rendered frames"
-    if spec == "classical":
-        return perception.make_detector("classical", det_cfg), "classical OpenCV detector on the rendered frames"
-    return perception.make_detector(spec, det_cfg), f"detector {spec} on the rendered frames"
+@functools.lru_cache(maxsize=8)
+def built_scene(config: SceneConfig) -> Scene:
+    """:func:`~lapwrench.sim.scene.build.build_scene`, once per configuration in a process: every world
+    copies the scene's model before it writes to it (:class:`SimWorld`), so the runs of one configuration
+    share it (the demo's scenarios build some forty loops; a build costs a few hundred ms)."""
+    return build_scene(config)
 
 
 _ZERO_WRENCH = np.zeros(6)  # a paper cue the configuration switched off
@@ -114,8 +69,12 @@ class Trace:
     columns: dict[str, list] = field(default_factory=dict)
 
     def add(self, **values: object) -> None:
+        cols = self.columns
         for k, v in values.items():
-            self.columns.setdefault(k, []).append(v)
+            col = cols.get(k)
+            if col is None:
+                col = cols[k] = []
+            col.append(v)
 
     def __getitem__(self, key: str) -> np.ndarray:
         return np.asarray(self.columns[key])
@@ -167,12 +126,13 @@ class ClosedLoop:
         on_frame: Callable[[np.ndarray, float, str], None] | None = None,
         world: WorldVariation | None = None,
         render_in_background: bool = False,
+        detector_threads: int | None = None,
     ) -> None:
         self.cfg = cfg
         self.seed = seed
         self.variation = world or WorldVariation()
         sc = self.variation.scene(scene_config or SceneConfig.from_config(cfg))
-        self.world = SimWorld(build_scene(sc))
+        self.world = SimWorld(built_scene(sc))
         self.world.reset()
         self.model = RobotModel(sc.kind, sc.scope)
         self.controller = Controller(cfg, self.model)
@@ -183,7 +143,8 @@ class ClosedLoop:
         self.tactile = TactileGripModel(seed=s_tac)
         bias = arm_spec(sc.kind).sim_torque_bias
         self.robot = SimRobot(
-            self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=bias, seed=s_obs)
+            self.world, estimate=ForceEstimateConfig(torque_noise=TORQUE_NOISE, torque_bias=bias, seed=s_obs),
+            model=self.model,
         )
         # the same measured-state bounds as on the robot; compute time measured, no wall-clock deadline
         self.supervisor = SafetySupervisor(
@@ -200,7 +161,7 @@ class ClosedLoop:
         self.detection: SimulatedAsyncDetector | None = None
         self.detector_name = "none"
         if detector is not None:
-            det, self.detector_name = make_detector(detector, self.world, cfg)
+            det, self.detector_name = make_detector(detector, self.world, cfg, detector_threads)
             v = self.variation
             if v.detector_corrupted:
                 det = CorruptedDetector(det, v.detector_dropout, v.detector_noise_px, seed=s_det)
@@ -369,28 +330,30 @@ class ClosedLoop:
         telemetry (``cue:<name>.<field>``), whatever cues the configuration runs."""
         w = self.world
         p_E, d_z = w.shaft_axis()
-        cues: dict[str, object] = {f"cue:{name}": v for name, v in res.wrenches.items()}
+        incision = w.incision_position()
+        wrenches = res.wrenches
+        cues: dict[str, object] = {f"cue:{name}": v for name, v in wrenches.items()}
         for cue in self.controller.python_cues:
             values = (res.telemetry or {}).get(cue.name, ())
             for field_name, x in zip(cue.telemetry_fields, values, strict=False):
                 cues[f"cue:{cue.name}.{field_name}"] = x
-        trace.add(**cues)
         trace.add(
+            **cues,
             t=res.time,
             mode=res.mode,
             delta=res.delta,
             rcm_error_ctrl=res.rcm_error,
             rcm_error_phys=self.physical_rcm_error(),
             contact_force=w.contact_force(),
-            W_h=res.wrenches.get("interaction", _ZERO_WRENCH),
-            W_c=res.wrenches.get("tracking", _ZERO_WRENCH),
+            W_h=wrenches.get("interaction", _ZERO_WRENCH),
+            W_c=wrenches.get("tracking", _ZERO_WRENCH),
             p_R=res.p_R,
-            incision=w.incision_position(),
+            incision=incision,
             p_E=p_E,
             d_z=d_z,
             q_ref=res.q_ref,
             hand_force=w.hand_force(),
             hand_torque=w.hand_torque(),
-            insertion_depth=w.insertion_depth(),
+            insertion_depth=float((incision - p_E) @ d_z),  # SimWorld.insertion_depth, from the poses read above
             **extra,
         )

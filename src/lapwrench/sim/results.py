@@ -50,6 +50,8 @@ class ScenarioOptions:
     video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
     progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
     detector: str = "shipped"  # "shipped", "classical", "projected" or a model path
+    detector_threads: int | None = None  # onnxruntime threads of an ONNX detector (None: its default)
+    render_in_background: bool = False  # draw the camera's frames in a child process (a core to spare)
     world: WorldVariation = field(default_factory=WorldVariation)  # the default world: no variation
 
 

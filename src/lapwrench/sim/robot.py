@@ -81,6 +81,7 @@ class SimRobot:
             run as fast as the simulation steps.
         hand_force_H: Optional ``f(t) -> (3,)`` hand force in the handle frame {H} (N), applied to
             the world before every step (``t`` is the robot time): a scripted surgeon's hand.
+        model: The arm's :class:`RobotModel` (default: one built for the world's arm and scope).
 
     Attributes:
         tau_J: Measured joint torques (with noise and bias) of the latest reading.
@@ -95,6 +96,7 @@ class SimRobot:
         estimate: ForceEstimateConfig | None = None,
         realtime: bool = False,
         hand_force_H: Callable[[float], Vec] | None = None,
+        model: RobotModel | None = None,
     ) -> None:
         self.world = world
         cfg = world.scene.config
@@ -104,7 +106,9 @@ class SimRobot:
         self.est = estimate or ForceEstimateConfig()
         self.realtime = realtime
         self.hand_force_H = hand_force_H
-        self.model = RobotModel(cfg.kind, cfg.scope)
+        # the estimator reads the model's fixed parts only (it evaluates on a workspace of its own), so
+        # a caller's model of this arm and scope may serve it too
+        self.model = model if model is not None else RobotModel(cfg.kind, cfg.scope)
         self._rng = np.random.default_rng(self.est.seed)
         self._noise = np.zeros((0, self.model.nv))  # torque noise drawn ahead (_torque_noise)
         self._noise_row = 0
@@ -127,7 +131,7 @@ class SimRobot:
         tau = w.joint_torque_tick_mean() if self.est.sampling == "tick_mean" else w.joint_torque_measured()
         tau_J = tau + self._bias
         if self.est.torque_noise > 0:
-            tau_J = tau_J + self._torque_noise()
+            tau_J += self._torque_noise()  # in place: tau_J is this reading's own array
         self.tau_J = tau_J
         force = self.observer.update(q, dq, tau_J, self.dt)
         return RobotReading(q, dq, force, self.robot_time)

@@ -158,7 +158,8 @@ def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> Scenari
         if round(t / 0.04) % 50 == 0:  # every 2 s for the snapshot strip
             snapshots.append((frame, label))
 
-    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame, world=opts.world)
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame, world=opts.world,
+                      detector_threads=opts.detector_threads, render_in_background=opts.render_in_background)
     trace = Trace()
     t0 = time.perf_counter()
     try:
@@ -169,7 +170,7 @@ def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> Scenari
             if opts.progress and round(loop.t * 1000) % 100 == 0:
                 opts.progress(0.1)
     finally:
-        loop.flush_frames()  # a frame drawn in the background (render_in_background) reaches the video
+        loop.close()  # a frame drawn in the background reaches the video; the render process and GL end
         if writer is not None:
             writer.close()
     m = run_metrics(loop, trace, time.perf_counter() - t0, script.track_index)

@@ -53,6 +53,7 @@ class SampleAndHold:
 
 
 _ZERO6 = np.zeros(6)
+NOISE_BLOCK_SAMPLES = 500  # F/T samples of noise drawn at once (a draw per sample costs microseconds)
 
 
 @kernel
@@ -100,6 +101,8 @@ class SimForceTorqueSensor:
         z6 = np.zeros(6)
         self._ft_sample = bind(_ft_sample, self._sensordata, self._adr, z6, z6, z6, z6, z6)
         self._rng = np.random.default_rng(seed)
+        self._z = np.zeros((0, 6))  # standard normal draws taken ahead, a row per sample (_next_z)
+        self._z_row = 0
         self._clock = SampleAndHold(self.noise.rate_hz)
         self._last: ForceTorqueReading | None = None
         self._bias_est = np.zeros(6)
@@ -112,10 +115,18 @@ class SimForceTorqueSensor:
             self._sigma6 = np.array([n.force_sigma] * 3 + [n.torque_sigma] * 3, float)
             self._noise_of = n
         w = np.empty(6)
-        # Force noise then torque noise, three draws each (one draw of six is the same stream).
-        z = self._rng.standard_normal(6)
-        self._ft_sample(self._sensordata, self._adr, self._bias6, self._sigma6, z, tare, w)
+        self._ft_sample(self._sensordata, self._adr, self._bias6, self._sigma6, self._next_z(), tare, w)
         return w
+
+    def _next_z(self) -> np.ndarray:
+        """This sample's six standard normal draws: force noise then torque noise, three each. The next
+        row of a block drawn at once: the same numbers as six draws per sample from the same generator."""
+        k = self._z_row
+        if k == self._z.shape[0]:
+            self._z = self._rng.standard_normal((NOISE_BLOCK_SAMPLES, 6))
+            k = 0
+        self._z_row = k + 1
+        return self._z[k]
 
     def _raw(self) -> np.ndarray:
         return self._sample(_ZERO6)  # x - 0.0 == x: the untared wrench, bit for bit
@@ -239,6 +250,13 @@ def _observer_step(
     return True
 
 
+def _f64_vector(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array (itself when it is one, the usual case)."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
+        return x
+    return np.ascontiguousarray(x, dtype=float)
+
+
 class ExternalForceObserver:
     """Estimated external force on the end effector in {B} from measured joint torques.
 
@@ -266,6 +284,7 @@ class ExternalForceObserver:
         self._integral = np.zeros(n)
         self._p0: np.ndarray | None = None
         self._data = model.model.createData()
+        self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         self._lower = np.tril_indices(n, -1)
         self._step = None  # the kernel bound to its argument types at the first update
         # Compile the tick (or load it from numba's cache) now, not in the first reading.
@@ -281,27 +300,22 @@ class ExternalForceObserver:
         """Advance one tick with the measured joint torques; returns the external force (N, {B})."""
         m, d = self.model.model, self._data
         # The bound kernel takes C-contiguous float64 vectors of the model's size, exactly.
-        q = np.ascontiguousarray(q, dtype=float)
-        dq = np.ascontiguousarray(dq, dtype=float)
-        tau_J = np.ascontiguousarray(tau_J, dtype=float)
         nv = m.nv
+        q, dq, tau_J = _f64_vector(q), _f64_vector(dq), _f64_vector(tau_J)
         if dq.shape != (nv,) or tau_J.shape != (nv,):
             dq, tau_J = (np.ascontiguousarray(np.broadcast_to(x, (nv,)), dtype=float) for x in (dq, tau_J))
+        # Pinocchio hands out fresh C-ordered arrays (ascontiguousarray returns them as they are).
         M = np.ascontiguousarray(pin.crba(m, d, q))
         C = np.ascontiguousarray(pin.computeCoriolisMatrix(m, d, q, dq))
         g = np.ascontiguousarray(pin.computeGeneralizedGravity(m, d, q))
-        J = np.ascontiguousarray(
-            pin.computeFrameJacobian(m, d, q, self.model.frame_E, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        )
+        J = np.ascontiguousarray(pin.computeFrameJacobian(m, d, q, self.model.frame_E, self._lwa))
         first = self._p0 is None
         if first:
             self._p0 = np.empty(nv)
         r_new = np.empty(nv)
         force = np.empty(3)
-        args = (
-            M, C, g, J, dq, tau_J, np.ascontiguousarray(self.r, dtype=float), float(dt), float(self.gain),
-            float(self.damping) ** 2, first, self._p0, self._integral, r_new, force,
-        )  # fmt: skip
+        args = (M, C, g, J, dq, tau_J, self.r, float(dt), float(self.gain), float(self.damping) ** 2, first, self._p0,
+                self._integral, r_new, force)
         if self._step is None:
             self._step = bind(_observer_step, *args)
         ok = self._step(*args)

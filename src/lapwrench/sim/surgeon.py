@@ -24,10 +24,22 @@ import numpy as np
 from lapwrench.sim.world import SimWorld
 
 
+def _norm(u: np.ndarray) -> float:
+    """|u| as ``np.linalg.norm`` computes it for a vector (sqrt(u.dot(u))), bit for bit, without its overhead."""
+    return math.sqrt(u.dot(u))
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``np.clip`` of one number, bit for bit (NaN passes; at a tie ``x`` is kept, so -0.0 stays -0.0
+    against a 0.0 bound, as numpy's does), without the cost of an array call: the hands call it every
+    control period."""
+    return min(max(x, lo), hi)
+
+
 def across_shaft(v: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Unit vector of the part of ``v`` perpendicular to the shaft direction ``d``."""
     u = v - (v @ d) * d
-    return u / max(np.linalg.norm(u), 1e-12)
+    return u / max(_norm(u), 1e-12)
 
 
 def axis_angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -85,9 +97,7 @@ class HandGuide:
                 self._speed += (rate - self._speed) * min(1.0, dt / 0.05)  # 50 ms perception lag
             self._prev_angle = angle
             wanted = min(self.max_speed, 2.0 * angle)
-            self._force = float(
-                np.clip(self._force + self.force_rate * (wanted - self._speed) * dt, 0.0, self.max_force)
-            )
+            self._force = _clip(self._force + self.force_rate * (wanted - self._speed) * dt, 0.0, self.max_force)
             magnitude = self._force
         force = -magnitude * toward  # the handle sits behind the pivot: push it the other way
         world.set_hand_wrench(force=force, torque=self.twist_torque * d)
@@ -180,14 +190,14 @@ class SpeedDrivenHand:
         if self._d0 is None:
             self._d0 = d
         if self._prev is not None:
-            rate = float(np.linalg.norm(d - self._prev)) / dt
+            rate = _norm(d - self._prev) / dt
             self._speed += (rate - self._speed) * min(1.0, dt / self.lag)
         self._prev = d
         if self.engaged and axis_angle(d, self._d0) >= math.radians(self.sweep_deg):
             self.engaged = False
-        wanted = float(np.clip(self.gain * (self.speed - self._speed), 0.0, self.max_force)) if self.engaged else 0.0
+        wanted = _clip(self.gain * (self.speed - self._speed), 0.0, self.max_force) if self.engaged else 0.0
         step = self.force_rate * dt
-        self._force += float(np.clip(wanted - self._force, -step, step))
+        self._force += _clip(wanted - self._force, -step, step)
         if not self.engaged and self._force <= 0.0:
             world.set_hand_wrench()
             return 0.0

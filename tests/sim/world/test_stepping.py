@@ -166,3 +166,40 @@ def test_bad_velocity_references_raise(world: SimWorld) -> None:
     world.step([float(x) for x in q0], np.zeros(7, dtype=np.float32))
     np.testing.assert_array_equal(world.q_ref, q0)
     assert world.time == pytest.approx(0.003)
+
+
+def _sinusoid_run(world: SimWorld, n: int) -> list[np.ndarray]:
+    """``n`` ticks with a moving reference and hand; per tick the state, the sensors and the trocar force."""
+    out = []
+    q0 = world.scene.q0
+    for k in range(n):
+        world.set_hand_wrench(force=[3.0 * np.sin(0.01 * k), 1.0, 0.0])
+        world.step(q0 + 0.02 * np.sin(2 * np.pi * 0.5 * k * 1e-3))
+        out.append(np.concatenate([world.data.qpos, world.data.qvel, world.data.sensordata, world.contact_force()]))
+    return out
+
+
+def test_the_readings_after_a_tick_are_those_of_its_end_state(world: SimWorld) -> None:
+    """The sensors are off during the substeps: after the tick they are those of a full forward
+    evaluation at its end state, bit for bit, and the model's flags are as they were."""
+    flags = world.model.opt.disableflags
+    _sinusoid_run(world, 30)
+    assert world.model.opt.disableflags == flags
+    data = mujoco.MjData(world.model)
+    data.qpos[:], data.qvel[:], data.ctrl[:] = world.data.qpos, world.data.qvel, world.data.ctrl
+    data.xfrc_applied[:], data.eq_active[:] = world.data.xfrc_applied, world.data.eq_active
+    data.mocap_pos[:], data.mocap_quat[:] = world.data.mocap_pos, world.data.mocap_quat
+    data.qacc_warmstart[:] = world.data.qacc_warmstart  # where the constraint solver starts
+    mujoco.mj_forward(world.model, data)
+    assert np.array_equal(data.sensordata, world.data.sensordata)
+    assert np.array_equal(data.efc_force, world.data.efc_force)
+
+
+def test_skipping_the_collision_pass_changes_nothing(panda_scene) -> None:
+    """The scene's geoms never touch, so the world turns contacts off: the same trajectory as with them on."""
+    skip, full = SimWorld(panda_scene), SimWorld(panda_scene)
+    contact = int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+    assert skip.model.opt.disableflags & contact
+    full.model.opt.disableflags &= ~contact
+    for a, b in zip(_sinusoid_run(skip, 200), _sinusoid_run(full, 200), strict=True):
+        assert np.array_equal(a, b)

@@ -14,8 +14,10 @@ import mujoco
 import numpy as np
 
 from lapwrench.jit import bind
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
 from lapwrench.robot.limits import joint_torque_limits
+from lapwrench.robot.model import scope_axis
 from lapwrench.sim.offscreen import scope_view_option
 from lapwrench.sim.scene.build import Scene, build_scene
 from lapwrench.sim.scene.config import SceneConfig
@@ -45,9 +47,10 @@ from lapwrench.sim.world.kernels import (
     _begin_tick,
     _end_tick,
     _substep_torque,
+    _weld_force,
 )
 from lapwrench.sim.world.loads import WorldLoads
-from lapwrench.sim.world.model_facts import _slice_if_contiguous, mocap_is_inert
+from lapwrench.sim.world.model_facts import _slice_if_contiguous, contacts_impossible, mocap_is_inert
 from lapwrench.sim.world.rendering import WorldRendering
 from lapwrench.sim.world.stepping import WorldStepping
 
@@ -92,6 +95,9 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         m.actuator_gainprm[self._act, 0] = self._kp
         m.actuator_biasprm[self._act, 1] = -self._kp
         m.actuator_biasprm[self._act, 2] = -self._kv
+        if contacts_impossible(m):  # no geoms that can touch: skip collision detection (same results)
+            m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+        self._opt = m.opt  # the substeps switch the sensors off (stepping)
         self._armature = m.dof_armature[self._vadr].copy()
         self._dof_damping = m.dof_damping[self._vadr].copy()
         self._tau_max = joint_torque_limits(scene.config.kind)
@@ -178,6 +184,11 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
             self._xmat, self._ids, self._depth_range, self.max_contact_force, d.efc_type, d.efc_id,
             d.efc_force, self._mocap_pos_flat, self._mocap_quat_flat, self._eq_active, self._fwd,
         )  # fmt: skip
+        # The readings' kernels, bound as well: the scenarios' records read them every tick.
+        z3 = np.zeros(3)
+        self._weld_force = bind(_weld_force, d.efc_type, d.efc_id, d.efc_force, self._weld, z3)
+        self._scope_axis = bind(scope_axis, self._xmat[self._body_E].reshape(3, 3))
+        self._axis_error_and_depth = bind(axis_rcm_error_and_depth, z3, z3, np.zeros((3, 3)), z3, 0.0)
         self.reset()
         self._warm_up()
 

@@ -6,11 +6,27 @@ A mixin: the world builds the views of ``MjData`` and the ids it writes (listed 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from lapwrench.sim.scene.instruments import instrument_pose_through_port
 from lapwrench.sim.world.kernels import _all_finite
+
+_NO_LOAD = (0.0, 0.0, 0.0)
+
+
+def _three_finite(v: ArrayLike | None, name: str) -> tuple[float, ...]:
+    """``v`` as three finite floats ((0, 0, 0) for None); ValueError naming the hand's ``name`` otherwise.
+    A tuple of Python floats: called every control period, it must be cheap."""
+    if v is None:
+        return _NO_LOAD
+    a = np.asarray(v, float)
+    x = tuple(a.tolist()) if a.shape == (3,) else ()
+    if len(x) != 3 or not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])):
+        raise ValueError(f"hand {name} must be 3 finite numbers, got {v!r}")
+    return x
 
 
 class WorldLoads:
@@ -34,15 +50,9 @@ class WorldLoads:
         Keyword-only, so the order cannot be mixed up: MuJoCo's ``xfrc_applied`` row is
         [force; torque], lapwrench's wrenches (:class:`~lapwrench.spatial.Wrench`) are [moment; force].
         """
-        f = np.zeros(3) if force is None else np.asarray(force, float)
-        tau = np.zeros(3) if torque is None else np.asarray(torque, float)
-        for name, v, given in (("force", f, force), ("torque", tau, torque)):
-            if v.shape != (3,) or not _all_finite(v):
-                raise ValueError(f"hand {name} must be 3 finite numbers, got {given!r}")
+        row = _three_finite(force, "force") + _three_finite(torque, "torque")
         # lap_H is massless, so its xfrc_applied acts at the lap_H origin.
-        row = self._xfrc_applied[self._body_H]
-        row[:3] = f
-        row[3:] = tau
+        self._xfrc_applied[self._body_H] = row
 
     def hand_force(self) -> np.ndarray:
         """The hand force (N, {B}) currently applied at lap_H (:meth:`set_hand_wrench`)."""

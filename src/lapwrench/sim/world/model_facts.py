@@ -1,6 +1,6 @@
 """Facts about the compiled ``MjModel`` that :class:`~lapwrench.sim.world.SimWorld` works out once at
-construction: whether an index set is a contiguous run (then it reads views, not copies), and whether
-the mocap poses (the instruments) can change the dynamics at all."""
+construction: whether an index set is a contiguous run (then it reads views, not copies), whether
+the mocap poses (the instruments) can change the dynamics at all, and whether any contact can arise."""
 
 from __future__ import annotations
 
@@ -12,6 +12,18 @@ def _slice_if_contiguous(idx: np.ndarray) -> slice | np.ndarray:
     """``slice(a, a + n)`` when ``idx`` is a run of consecutive indices (views), else ``idx``."""
     a = int(idx[0])
     return slice(a, a + len(idx)) if np.array_equal(idx, np.arange(a, a + len(idx))) else idx
+
+
+def contacts_impossible(m: mujoco.MjModel) -> bool:
+    """True when collision detection can find nothing: no explicit contact pair, no flex, and no
+    contype bit of any geom among the conaffinity bits of any geom (MuJoCo's filter, judged on all the
+    geoms at once: a conservative answer). Disabling contacts then changes no result and skips the
+    collision pass of every forward evaluation."""
+    if m.npair or m.nflex:
+        return False
+    contype = np.bitwise_or.reduce(m.geom_contype) if m.ngeom else 0
+    conaffinity = np.bitwise_or.reduce(m.geom_conaffinity) if m.ngeom else 0
+    return not (int(contype) & int(conaffinity))
 
 
 def mocap_is_inert(m: mujoco.MjModel) -> bool:

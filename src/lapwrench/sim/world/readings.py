@@ -7,14 +7,13 @@ All vectors are in the base (= world) frame, SI units.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import mujoco
 import numpy as np
 
-from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.description import FRAME_C
-from lapwrench.robot.model import scope_axis
 from lapwrench.sim.scene.build import Scene
-from lapwrench.sim.world.kernels import _weld_force
 
 
 class WorldReadings:
@@ -44,6 +43,10 @@ class WorldReadings:
     _xmat: np.ndarray
     _q_ref_prev: np.ndarray
     _tau_J_mean: np.ndarray
+    # kernels bound at construction (:mod:`.core`): _weld_force, scope_axis, axis_rcm_error_and_depth
+    _weld_force: Callable[..., None]
+    _scope_axis: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    _axis_error_and_depth: Callable[..., tuple[float, float]]
 
     def _body_id(self, name: str) -> int:
         """Body id by name, looked up once."""
@@ -124,7 +127,7 @@ class WorldReadings:
         # to the shaft. Zero when the weld has no rows (inactive).
         d = self.data
         f = np.empty(3)
-        _weld_force(d.efc_type, d.efc_id, d.efc_force, self._weld, f)
+        self._weld_force(d.efc_type, d.efc_id, d.efc_force, self._weld, f)
         return f
 
     def incision_position(self) -> np.ndarray:
@@ -152,8 +155,8 @@ class WorldReadings:
         place of the model's p_E and the controller's p_R.
         """
         b = self._body_E
-        d_z, P = scope_axis(self._xmat[b].reshape(3, 3))
-        e, depth = axis_rcm_error_and_depth(
+        d_z, P = self._scope_axis(self._xmat[b].reshape(3, 3))
+        e, depth = self._axis_error_and_depth(
             self._xpos[b], d_z, P, np.ascontiguousarray(point, dtype=np.float64), float(self.scene.config.scope.length)
         )
         return float(e), float(depth)

@@ -56,6 +56,8 @@ from lapwrench.sim.world.kernels import (
 )
 from lapwrench.sim.world.readings import WorldReadings
 
+_NO_SENSORS = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+
 
 class WorldStepping(WorldReadings):
     """The 1 kHz control tick of a :class:`~lapwrench.sim.world.SimWorld`: servo references in,
@@ -83,6 +85,7 @@ class WorldStepping(WorldReadings):
     _warn_idx: np.ndarray
     _warn: np.ndarray
     _depth_range: np.ndarray
+    _opt: mujoco.MjOption
 
     @property
     def time(self) -> float:
@@ -136,17 +139,27 @@ class WorldStepping(WorldReadings):
 
         ``reuse_forward``: the position/velocity stages in ``data`` are those of the current state
         (the last ``mj_forward`` was at it), so the first substep needs ``mj_step2`` only.
+
+        The sensors are off during the substeps: the tick's closing ``mj_forward`` computes them at
+        the state every reading sees, and they never feed back into the dynamics (the same trajectory,
+        without their per-substep evaluation, the F/T's force pass through the whole tree included).
         """
         m, d = self.model, self.data
         n = self.n_substeps
         args = (self._qfrc_actuator, self._qfrc_damper, self._qvel, self._idx, self._const, self._work)
         substep_torque, tick = self._substep_torque, self._tick
-        for k in range(n):
-            if k == 0 and reuse_forward:
-                mujoco.mj_step2(m, d)
-            else:
-                mujoco.mj_step(m, d)  # d.qfrc_* now hold this substep's forces, d.qvel its end velocity
-            substep_torque(*args, k == n - 1, n, tick)
+        opt = self._opt
+        flags = opt.disableflags
+        opt.disableflags = flags | _NO_SENSORS
+        try:
+            for k in range(n):
+                if k == 0 and reuse_forward:
+                    mujoco.mj_step2(m, d)
+                else:
+                    mujoco.mj_step(m, d)  # d.qfrc_* now hold this substep's forces, d.qvel its end velocity
+                substep_torque(*args, k == n - 1, n, tick)
+        finally:
+            opt.disableflags = flags
 
     def _check(self) -> None:
         d = self.data
