@@ -145,10 +145,6 @@ def test_malformed_measured_joints_hold(limits: JointLimits, q_measured: np.ndar
     assert s.alarm and s.alarm_reason.startswith("joints_nonfinite: measured joints")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="watches._watch_joints says 'not finite' for finite joints of the wrong shape (report: diff)",
-)
 def test_measured_joints_of_the_wrong_shape_say_so(limits: JointLimits) -> None:
     s = started(limits)
     s.filter(0.0, DEFAULT_Q0, q_measured=DEFAULT_Q0[:6])

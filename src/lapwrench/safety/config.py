@@ -10,7 +10,8 @@ Kept apart from the supervisor so the types every loop and logger imports stay s
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, fields
 from enum import StrEnum
 from typing import Any
 
@@ -92,20 +93,30 @@ class SupervisorConfig:
     max_events: int = 10_000
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                raise ValueError(f"supervisor.{f.name} must be a number, got {v!r}")
         for name in (
             "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "cycle_budget", "rest_velocity"
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"supervisor.{name} must be positive, got {v!r}")
+        for name in ("position_tolerance", "residual_force_time"):  # NaN or inf would switch a check off
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"supervisor.{name} must be finite and >= 0, got {v!r}")
         if self.check_fraction > 1.0 or self.stop_fraction > 1.0:
             raise ValueError("supervisor check_fraction and stop_fraction must be <= 1")
         if not (math.isfinite(self.depth_min) and math.isfinite(self.depth_max) and self.depth_min < self.depth_max):
             raise ValueError(f"need finite depth_min < depth_max, got {self.depth_min!r}, {self.depth_max!r}")
         if not 0 <= self.joint_stop_margin <= self.joint_warn_margin:
             raise ValueError("need 0 <= joint_stop_margin <= joint_warn_margin")
-        if self.max_consecutive_misses < 0:
-            raise ValueError("max_consecutive_misses must be >= 0")
+        for name in ("max_consecutive_misses", "max_events"):
+            v = getattr(self, name)
+            if not isinstance(v, numbers.Integral) or v < 0:
+                raise ValueError(f"supervisor.{name} must be a whole number >= 0, got {v!r}")
 
     @classmethod
     def from_config(cls, cfg: Config, **overrides: Any) -> SupervisorConfig:

@@ -114,7 +114,10 @@ class SupervisorWatches:
         qm = q_measured
         if not (type(qm) is np.ndarray and qm.dtype == np.float64 and qm.flags.c_contiguous):
             qm = np.ascontiguousarray(q_measured, dtype=np.float64)
-        finite, j, room = self._joints_room(qm, self._lo, self._hi) if qm.shape == self._lo.shape else (False, 0, 0.0)
+        if qm.shape != self._lo.shape:
+            self._hold(time, "joints_nonfinite", f"measured joints have shape {qm.shape}, expected {self._lo.shape}")
+            return
+        finite, j, room = self._joints_room(qm, self._lo, self._hi)
         if not finite:
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return

@@ -42,11 +42,6 @@ def test_the_world_raises_it_on_a_non_finite_reference(world: SimWorld) -> None:
     assert str(info.value).startswith("simulation unstable at t = 0.0010 s: joint reference q_ref = array([")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="SimulationUnstableError(time, quantity, value) keeps only the message in args, so unpickling "
-    "calls __init__(message) and fails: it cannot cross a process boundary (report: diff)",
-)
 def test_it_survives_a_process_boundary() -> None:
     """Scenarios run in worker processes (the demo, the sweeps). Both turn this error into text inside
     the worker today; an exception that escapes a worker comes back to the parent pickled."""

@@ -13,3 +13,8 @@ class SimulationUnstableError(RobotError):
         self.quantity = quantity
         self.value = value
         super().__init__(f"simulation unstable at t = {time:.4f} s: {quantity} = {value}")
+
+    def __reduce__(self) -> tuple[type[SimulationUnstableError], tuple[float, str, float | str]]:
+        """Pickle by the constructor's arguments (``args`` holds only the message), so the error can
+        cross a process boundary (the demo's and the sweeps' worker processes)."""
+        return type(self), (self.time, self.quantity, self.value)
