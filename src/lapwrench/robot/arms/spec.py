@@ -9,6 +9,7 @@ defines one; :mod:`lapwrench.robot.arms` registers them. Nothing here imports th
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,20 +28,26 @@ class PackageUrdf:
     suffix: str
 
     def path(self) -> Path:
-        """The file's absolute path; :class:`RobotDescriptionError` naming the package if absent."""
-        try:
-            files = importlib.metadata.files(self.distribution) or []
-        except importlib.metadata.PackageNotFoundError as exc:
-            raise RobotDescriptionError(
-                f"this robot's description comes with the '{self.distribution}' package: pip install "
-                f"{self.distribution}"
-            ) from exc
-        for f in files:
-            if str(f).endswith(self.suffix):
-                found = Path(str(f.locate()))
-                if found.is_file():
-                    return found
-        raise RobotDescriptionError(f"{self.distribution} is installed but ships no {self.suffix}")
+        """The file's absolute path; :class:`RobotDescriptionError` naming the package if absent.
+        Found once per process (:func:`_locate`): the package's file list has thousands of entries."""
+        return _locate(self.distribution, self.suffix)
+
+
+@functools.cache
+def _locate(distribution: str, suffix: str) -> Path:
+    """The installed file of ``distribution`` whose path ends with ``suffix`` (a failure is not cached)."""
+    try:
+        files = importlib.metadata.files(distribution) or []
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise RobotDescriptionError(
+            f"this robot's description comes with the '{distribution}' package: pip install {distribution}"
+        ) from exc
+    for f in files:
+        if str(f).endswith(suffix):
+            found = Path(str(f.locate()))
+            if found.is_file():
+                return found
+    raise RobotDescriptionError(f"{distribution} is installed but ships no {suffix}")
 
 
 @dataclass(frozen=True)
