@@ -138,3 +138,39 @@ def test_an_exception_in_a_plugin_reaches_the_loop_which_stops_to_rest(cfg: Conf
     ctrl = Controller(cfg, extra_cues=[cue])
     _, log = run_virtual(cfg, duration=0.2, controller=ctrl)
     assert log.alarm is not None and "boom" in log.alarm
+
+
+class Recorder(Cue):
+    """A plugin cue with a zero wrench that keeps copies of what it read each tick."""
+
+    def __init__(self, cfg: Config) -> None:
+        super().__init__("recorder", None, cfg)
+        self.seen: list[tuple[np.ndarray, np.ndarray, float]] = []
+
+    def compute(self, ctx: TickContext) -> Wrench:
+        self.seen.append((ctx.kin.q.copy(), ctx.geometry.p_G.copy(), ctx.geometry.s_star))
+        return Wrench.zero(ctx.geometry.p_G)
+
+
+def test_python_cues_read_this_tick_and_what_the_tick_returns_outlives_the_next(cfg: Config) -> None:
+    cue = Recorder(cfg)
+    ctrl = Controller(cfg, extra_cues=[cue])
+    q0 = home_pose(cfg.robot.kind)
+    ctrl.reset(q0)
+    results, kept, refs = [], [], []
+    for k in range(3):
+        assert ctrl.ref is not None
+        refs.append(ctrl.ref.q.copy())
+        q = q0 + 0.01 * k
+        r = ctrl.tick(SensorFrame(0.001 * k, robot=RobotReading(q, np.zeros(q.shape[0]), np.ones(3), 0.001 * k)))
+        results.append(r)
+        kept.append((r.e_R.copy(), r.p_R.copy(), r.p_G.copy(), r.residual_lateral.copy()))
+    for r, (e_R, p_R, p_G, F_lat) in zip(results, kept, strict=True):  # unchanged by the later ticks
+        for a, b in ((r.e_R, e_R), (r.p_R, p_R), (r.p_G, p_G), (r.residual_lateral, F_lat)):
+            np.testing.assert_array_equal(a, b)
+    seen = cue.seen[-3:]  # the warm-up ran the cue too
+    for (q_seen, p_G_seen, s_star), r, q_ref in zip(seen, results, refs, strict=True):
+        np.testing.assert_array_equal(q_seen, q_ref)  # the kinematics at this tick's reference
+        np.testing.assert_array_equal(p_G_seen, r.p_G)  # the geometry of this tick
+        assert s_star > 0.0  # the closest point's parameter, not the placeholder
+    assert not np.array_equal(seen[0][1], seen[2][1])  # the ticks differed

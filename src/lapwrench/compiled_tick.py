@@ -8,8 +8,10 @@ placement of {E} come in its own layouts (:meth:`~lapwrench.robot.model.RobotMod
 
 When every configured cue is one of the paper's (fused into the compiled maths) the tick is one
 call (:func:`~lapwrench.tick_core.tick_stage`). With cues that run in Python (plugins) it is two,
-:func:`~lapwrench.tick_core.geometry_stage` and :func:`~lapwrench.tick_core.motion_tail`, with
-those cues evaluated on the tick's geometry in between. Both give a :class:`StageResult`.
+:func:`~lapwrench.tick_entry.front_into` (the kinematics, the measured axis, ΔF and the geometry)
+and :func:`~lapwrench.tick_entry.motion_tail_from`, with those cues evaluated in between on the
+tick's kinematics and geometry: views of one buffer bound here, which both calls share (valid for
+the tick). Both give a :class:`StageResult`.
 """
 
 from __future__ import annotations
@@ -22,12 +24,13 @@ import numpy as np
 
 from lapwrench.allocation import nullspace_wrench
 from lapwrench.jit import bind
-from lapwrench.motion.measured_feedback import NO_AXIS, MeasuredFeedback
-from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState, residual_force
-from lapwrench.robot.model import Kinematics, KinematicTerms, ScopeAxis, assemble_kinematics
+from lapwrench.motion.measured_feedback import MeasuredFeedback
+from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState
+from lapwrench.robot.model import KinematicTerms
 from lapwrench.sensors import ValidInputs
 from lapwrench.spatial import Mat, Vec, Wrench
-from lapwrench.tick_core import SaturationInputs, geometry_stage, motion_tail, tick_stage
+from lapwrench.tick_core import SaturationInputs, tick_stage
+from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
 
@@ -74,12 +77,6 @@ def _f64(x: object) -> Vec:
     return np.ascontiguousarray(x, dtype=np.float64)
 
 
-def _points(x: object) -> Mat:
-    """Image points as a C-contiguous float64 (n, 2) array (itself when it is one already)."""
-    a = _f64(x)
-    return a if a.ndim == 2 and a.shape[1] == 2 else a.reshape(-1, 2)
-
-
 _ZERO3 = np.zeros(3)
 _NO_TACTILE = np.zeros(64)
 _NO_POINTS = np.zeros((0, 2))
@@ -102,45 +99,42 @@ class CompiledTick:
         self.sat = SaturationInputs.allocate(params.q_lo.shape[0])
 
     # -- arguments of fixed types --------------------------------------------------------------
-    def _sensor_args(self, inputs: ValidInputs) -> tuple[object, ...]:
-        ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
+    # the readings as they are: the validator hands on C-contiguous float64 arrays of the right shapes only
+    # (sensors.py), the types the stages are bound to
+    def _front_args(self, terms: KinematicTerms, inputs: ValidInputs) -> tuple[object, ...]:
+        robot, ft = inputs.robot, inputs.ft
+        ext = None if robot is None else robot.external_force
+        R_m, p_m, has_measured = self.feedback.measured_placement(None if robot is None else robot.q)
         return (
-            _ZERO3 if ft is None else _f64(ft.force), _ZERO3 if ft is None else _f64(ft.torque), ft is not None,
-            _NO_TACTILE if tactile is None else _f64(tactile.values), tactile is not None,
-            _NO_POINTS if obs is None else _points(obs.points),
+            terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
+            self.feedback.offsets, R_m, p_m, has_measured, _ZERO3 if ft is None else ft.force, ft is not None,
+            self.params,
         )
 
     def _tick_args(
         self, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
-        robot, ft, tactile, obs = inputs.robot, inputs.ft, inputs.tactile, inputs.instruments
-        ext = None if robot is None else robot.external_force
-        R_m, p_m, has_measured = self.feedback.measured_placement(None if robot is None else robot.q)
-        # _sensor_args written out, this runs every tick; the readings as they are: the validator hands on
-        # C-contiguous float64 arrays of the right shapes only (sensors.py), the types the tick is bound to
+        ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
+        front = self._front_args(terms, inputs)
         return (
-            terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
-            self.feedback.offsets, R_m, p_m, has_measured,
-            _ZERO3 if ft is None else ft.force, _ZERO3 if ft is None else ft.torque, ft is not None,
+            *front[:10], _ZERO3 if ft is None else ft.torque, ft is not None,
             _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
             _NO_POINTS if obs is None else obs.points,
             _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
         )
 
-    def _geometry_args(
-        self, kin: Kinematics, residual: Vec | None, measured: ScopeAxis, has_measured: bool
-    ) -> tuple[object, ...]:
-        r = _ZERO3 if residual is None else _f64(residual)
-        return (kin, self.rcm.state, self.rcm.params, r, residual is not None, self.feedback.offsets, measured,
-                bool(has_measured), self.params)
-
     def _motion_args(
-        self, kin: Kinematics, geo: object, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec, stopping: bool,
-        R_E0: Mat, may_admit: bool,
+        self, s_star: float, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec, stopping: bool, R_E0: Mat,
+        may_admit: bool,
     ) -> tuple[object, ...]:
-        return (kin, geo, *self._sensor_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
-                _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
-                self.params)
+        ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
+        return (
+            self._buf, s_star, _ZERO3 if ft is None else ft.force, _ZERO3 if ft is None else ft.torque, ft is not None,
+            _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
+            _NO_POINTS if obs is None else obs.points, extra.W, extra.points, extra.D, extra.task_F,
+            _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
+            self.params,
+        )
 
     # -- warm-up -------------------------------------------------------------------------------
     def bind(self, terms: KinematicTerms, R_E0: Mat) -> None:
@@ -155,16 +149,17 @@ class CompiledTick:
             args = self._tick_args(terms, none, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
-            self._assemble = bind(assemble_kinematics, *terms)
-            kin = self._assemble(*terms)
             one = np.zeros((1, 6)), np.zeros((1, 3)), np.zeros(3)
             self._about_p_G = bind(nullspace_wrench, *one)  # eq (39) for one wrench: the eq (38) sum of one
-            g_args = self._geometry_args(kin, None, NO_AXIS, False)
-            self._geometry_stage = bind(geometry_stage, *g_args)
-            geo, _ = self._geometry_stage(*g_args)
-            m_args = self._motion_args(kin, geo, none, _NO_EXTRA, zero, False, R_E0, True)
-            self._motion_tail = bind(motion_tail, *m_args)
-            self._motion_tail(*m_args)
+            n = terms.q.shape[0]
+            self._buf = np.zeros(front_size(n))  # the kinematics and geometry of the ticks with Python cues
+            self._kin, self._geo = front_views(self._buf, n, 0.0)  # views of it, cut once
+            f_args = (*self._front_args(terms, none), self._buf)
+            self._front_into = bind(front_into, *f_args)
+            _, s_star, _ = self._front_into(*f_args)
+            m_args = self._motion_args(s_star, none, _NO_EXTRA, zero, False, R_E0, True)
+            self._motion_tail_from = bind(motion_tail_from, *m_args)
+            self._motion_tail_from(*m_args)
         finally:
             self.rcm.state, self.feedback.offsets = live_rcm, live_offsets
 
@@ -201,23 +196,21 @@ class CompiledTick:
         self, t: float, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat,
         may_admit: bool,
     ) -> StageResult:
-        measured, has_measured = self.feedback.measured_axis(None if inputs.robot is None else inputs.robot.q)
-        kin = self._assemble(*terms)
-        robot, ft = inputs.robot, inputs.ft
-        residual = None
-        if ft is not None and robot is not None and robot.external_force is not None:
-            residual = residual_force(kin.R_H @ _f64(ft.force), _f64(robot.external_force))
-        geo, F_lat = self._geometry_stage(*self._geometry_args(kin, residual, measured, has_measured))
-        extra = self._evaluate_cues(TickContext(t, kin, geo, inputs))
-        W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail(
-            *self._motion_args(kin, geo, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
+        vec3, s_star, has_residual = self._front_into(*self._front_args(terms, inputs), self._buf)
+        e_R, p_R, p_G, F_lat, residual = vec3  # row views of a new array: what outlives the tick
+        geo = self._geo._replace(s_star=s_star)
+        extra = self._evaluate_cues(TickContext(t, self._kin, geo, inputs))
+        W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail_from(
+            *self._motion_args(s_star, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
         )
         W_r, W_h, W_c, W_f, W_n = W
         q, dq, ddq, tau = ref
         wrenches = {**self._paper_wrenches(W_r, W_h, W_c, W_f), **extra.by_name}
-        return StageResult._make((geo.e_R, geo.p_R, geo.p_G, F_lat, residual, wrenches, W_n, tau, delta, contacts,
-                                  non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped,
-                                  at, extra.telemetry, extra.faults))
+        return StageResult._make((
+            e_R, p_R, p_G, F_lat, residual if has_residual else None, wrenches, W_n, tau, delta, contacts,
+            non_finite, admitted, (q, dq, ddq) if admitted or saturated else None, clamped, at, extra.telemetry,
+            extra.faults,
+        ))
 
     def _evaluate_cues(self, ctx: TickContext) -> _Extra:
         """The Python cues this tick: the null-space wrenches with their points and summed damping, the

@@ -6,6 +6,7 @@ no cue runs in Python, :func:`tick_stage`):
 
 1. :func:`geometry_stage`: the adaptive RCM point (eq 19-26), the RCM error (eq 27), what the
    measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry (eq 28-36);
+   :func:`tick_front` adds the kinematics, the measured scope axis and ΔF (eq 19) before it;
 2. :func:`motion_stage`: the wrenches (eq 5-14, 40), the task/null-space allocation (eq 2-4, 37-39),
    the self-motion terms, the integration of the virtual model, the joint-limit box and the envelope rows.
 
@@ -296,25 +297,9 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickP
 
 @kernel
 def motion_tail(
-    kin: Kinematics,
-    geo: TaskGeometry,
-    ft_force: Vec,
-    ft_torque: Vec,
-    has_ft: bool,
-    tactile: Vec,
-    has_tactile: bool,
-    points: Mat,
-    extra_W: Mat,
-    extra_points: Mat,
-    extra_D: Mat,
-    extra_task_F: Vec,
-    ddq_ref: Vec,
-    stopping: bool,
-    R_E0: Mat,
-    depth_offset: float,
-    may_admit: bool,
-    sat: SaturationInputs,
-    p: TickParams,
+    kin: Kinematics, geo: TaskGeometry, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec, has_tactile: bool,
+    points: Mat, extra_W: Mat, extra_points: Mat, extra_D: Mat, extra_task_F: Vec, ddq_ref: Vec, stopping: bool,
+    R_E0: Mat, depth_offset: float, may_admit: bool, sat: SaturationInputs, p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
     """M⁻¹ from the tick's M (:func:`~lapwrench.robot.model.inverse_inertia`), :func:`motion_stage`,
     then (with ``may_admit``) the next reference: directly when the desired acceleration meets every
@@ -353,36 +338,13 @@ def motion_tail(
 
 
 @kernel
-def tick_stage(
-    terms: KinematicTerms,
-    rcm: AdaptiveState,
-    adaptive: AdaptiveParams,
-    ext_force: Vec,
-    has_ext: bool,
-    offsets: Vec,
-    R_measured: Mat,
-    p_measured: Vec,
-    has_measured: bool,
-    ft_force: Vec,
-    ft_torque: Vec,
-    has_ft: bool,
-    tactile: Vec,
-    has_tactile: bool,
-    points: Mat,
-    ddq_ref: Vec,
-    stopping: bool,
-    R_E0: Mat,
-    may_admit: bool,
-    sat: SaturationInputs,
-    p: TickParams,
+def tick_front(
+    terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
+    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, has_ft: bool, p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
-    """The whole compiled tick in one call, when every cue is compiled (no Python cues): the kinematics
-    from Pinocchio's terms, the scope axis at the measured joints from {E}'s measured placement
-    (``R_measured``, ``p_measured``), ΔF (eq 19) when the F/T and the robot's estimate are both valid,
-    :func:`geometry_stage` and :func:`motion_tail`.
-
-    Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
-    """
+    """The tick up to the cues: the kinematics from Pinocchio's terms, the scope axis at the measured joints
+    from {E}'s measured placement (``R_measured``, ``p_measured``), ΔF (eq 19; zero unless the F/T and the
+    robot's estimate are both valid) and :func:`geometry_stage`. Returns (kin, geo, F_re⊥, ΔF, has ΔF)."""
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
     has_residual = has_ft and has_ext
@@ -390,6 +352,24 @@ def tick_stage(
     d_z, P = scope_axis(R_measured)
     measured = ScopeAxis(p_measured, d_z, P)
     geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
+    return kin, geo, F_lat, residual, has_residual
+
+
+@kernel
+def tick_stage(
+    terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
+    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
+    has_tactile: bool, points: Mat, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool, sat: SaturationInputs,
+    p: TickParams,
+) -> tuple:  # type: ignore[type-arg]
+    """The whole compiled tick in one call, when every cue is compiled (no Python cues): :func:`tick_front`
+    and :func:`motion_tail`.
+
+    Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
+    """
+    kin, geo, F_lat, residual, has_residual = tick_front(
+        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, has_ft, p,
+    )
     W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
         kin, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
         np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,

@@ -42,7 +42,10 @@ Priority = Literal["task", "null"]
 @dataclass(frozen=True)
 class TickContext:
     """What a cue reads: the tick's time (s), the kinematics at the reference, the task geometry
-    (eq 27-36) and the inputs that passed validation (``inputs.extra`` holds registered inputs)."""
+    (eq 27-36) and the inputs that passed validation (``inputs.extra`` holds registered inputs).
+
+    The arrays of ``kin`` and ``geometry`` hold this tick's values only (the next tick overwrites
+    them, :mod:`lapwrench.tick_entry`): a cue copies what it keeps."""
 
     time: float
     kin: Kinematics
