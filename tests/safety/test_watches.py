@@ -168,6 +168,21 @@ def test_a_non_finite_residual_force_holds_at_once(limits: JointLimits, bad: flo
     assert "for 0 ms" in s.alarm_reason
 
 
+@pytest.mark.parametrize("shape", [(6,), (2,), (3, 1), ()])
+def test_a_residual_that_is_not_a_force_holds_saying_so(limits: JointLimits, shape: tuple[int, ...]) -> None:
+    s = started(limits)
+    s.filter(0.0, DEFAULT_Q0, residual=np.full(shape, 1.0), **SCOPE_OK)  # small values: only the shape is wrong
+    assert s.alarm and "residual force has shape" in s.alarm_reason
+
+
+def test_a_nan_compute_time_is_a_missed_deadline(limits: JointLimits) -> None:
+    s = started(limits, cycle_budget=0.0005, max_consecutive_misses=3)
+    s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
+    s.filter(DT, DEFAULT_Q0, compute_time=0.001)
+    s.filter(2 * DT, DEFAULT_Q0, compute_time=float("nan"))  # does not end the run of misses
+    assert s.deadline_misses == 3 and s.alarm and "3 consecutive deadline misses" in s.alarm_reason
+
+
 def test_deadline_misses_are_all_counted_but_rate_limited_in_the_log(limits: JointLimits) -> None:
     s = started(limits, cycle_budget=0.0005, max_consecutive_misses=0)  # 0: misses never stop the arm
     for k in range(1500):

@@ -145,7 +145,10 @@ class SupervisorWatches:
                 f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
             )
         if residual is not None:
-            r = np.asarray(residual, dtype=float).ravel()
+            r = np.asarray(residual, dtype=float)
+            if r.shape != (3,):  # ΔF is a force: a wrench or a matrix here is a wiring fault, not a force
+                self._hold(time, "residual_force", f"measured residual force has shape {r.shape}, expected 3 values")
+                return
             f = math.sqrt(r.dot(r))  # np.linalg.norm's formula for a vector, without its overhead
             over = not (f <= c.max_residual_force)
             if not over:
@@ -172,7 +175,7 @@ class SupervisorWatches:
 
     def _watch_deadline(self, time: float, compute_time: float) -> None:
         c = self.cfg
-        if compute_time > c.cycle_budget:
+        if not compute_time <= c.cycle_budget:  # a NaN compute time is a miss: it was not measured in time
             self.deadline_misses += 1
             self.consecutive_misses += 1
             self.counted_event(
