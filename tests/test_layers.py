@@ -57,7 +57,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("sensors", ("lapwrench.inputs", "lapwrench.sensors")),
     ("geometry", ("lapwrench.rcm",)),
     ("control-terms", ("lapwrench.wrenches", "lapwrench.allocation", "lapwrench.motion")),
-    ("control", ("lapwrench.tick_params", "lapwrench.tick_core", "lapwrench.compiled_tick", "lapwrench.controller")),
+    ("control", ("lapwrench.tick_params", "lapwrench.tick_core", "lapwrench.tick_entry", "lapwrench.compiled_tick",
+                 "lapwrench.controller")),
     (
         "loop",
         (

@@ -14,7 +14,6 @@ import os
 import platform
 import time
 import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -24,31 +23,12 @@ from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import cue_scenarios, report
-from lapwrench.sim.demo_tasks import PRINTED_DAMPING, TRACKING_SCENARIOS, DemoError, run_tasks
+from lapwrench.sim.demo_tasks import PRINTED_DAMPING, TRACKING_SCENARIOS, DemoError, DemoPlan, run_tasks
 from lapwrench.sim.results import ScenarioResult
 from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, scenarios_for
 from lapwrench.sim.world import CONTROL_DT
 
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits
-
-@dataclass(frozen=True)
-class DemoPlan:
-    out: Path
-    scenarios: tuple[str, ...]
-    configs: dict[str, config_mod.Config]
-    config_sources: dict[str, str]
-    seed: int
-    time_scale: float
-    video: bool
-    printed_damping_check: bool
-    detector: str = "shipped"
-    workers: int = 1  # scenarios run on this many processes (each scenario is seeded: same results)
-    skipped: tuple[str, ...] = ()  # scenarios left out by default on this arm (tuned for the Franka)
-
-    @property
-    def robot(self) -> str:  # the arm every scenario runs on (the configs' robot.kind)
-        return next(iter(self.configs.values())).robot.kind
-
 
 def plan_demo(
     out: str | Path,

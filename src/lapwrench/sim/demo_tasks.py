@@ -10,8 +10,10 @@ import multiprocessing as mp
 import os
 import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
 from queue import Empty
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from lapwrench import config as config_mod
 from lapwrench.sim.loop import SafetyStopError
@@ -19,10 +21,28 @@ from lapwrench.sim.results import ScenarioOptions, ScenarioResult
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, needle_search
 from lapwrench.sim.world import SimulationUnstableError
 
-if TYPE_CHECKING:
-    from lapwrench.sim.demo import DemoPlan
-
 TRACKING_SCENARIOS = ("needle-search", "workflow")
+
+
+@dataclass(frozen=True)
+class DemoPlan:
+    """What one ``lapwrench demo`` runs: every input checked (:func:`lapwrench.sim.demo.plan_demo`)."""
+
+    out: Path
+    scenarios: tuple[str, ...]
+    configs: dict[str, config_mod.Config]
+    config_sources: dict[str, str]
+    seed: int
+    time_scale: float
+    video: bool
+    printed_damping_check: bool
+    detector: str = "shipped"
+    workers: int = 1  # scenarios run on this many processes (each scenario is seeded: same results)
+    skipped: tuple[str, ...] = ()  # scenarios left out by default on this arm (tuned for the Franka)
+
+    @property
+    def robot(self) -> str:  # the arm every scenario runs on (the configs' robot.kind)
+        return next(iter(self.configs.values())).robot.kind
 
 
 class DemoError(RuntimeError):
