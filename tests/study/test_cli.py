@@ -64,7 +64,9 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
 def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
     """SIGTERM in the middle: exit 130, a readable table with the finished jobs; the same command again
     runs only the rest and writes the report."""
-    study = _write(tmp_path / "study.yaml", {**STUDY, "seeds": 6})
+    # jobs long enough that the first rows are saved (every 5 s) well before the last job ends: a study that
+    # finishes before its first save would be "killed" during Ray's shutdown instead of halfway
+    study = _write(tmp_path / "study.yaml", {**STUDY, "seeds": 6, "time_scale": 0.25})
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(out), "--workers", "1", "--quiet"]
     env = {**os.environ, "MUJOCO_GL": "egl"}
