@@ -84,6 +84,17 @@ _NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zero
 _NO_TELEMETRY: dict[str, tuple[float, ...]] = {}
 
 
+def _reading_args(inputs: ValidInputs) -> tuple[object, ...]:
+    """The readings as the stages take them: F/T force, torque, valid; tactile values, valid; image points
+    (the validator hands on C-contiguous float64 arrays of the right shapes only, the bound types)."""
+    ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
+    return (
+        _ZERO3 if ft is None else ft.force, _ZERO3 if ft is None else ft.torque, ft is not None,
+        _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
+        _NO_POINTS if obs is None else obs.points,
+    )
+
+
 class CompiledTick:
     """The compiled stages bound to one controller's state and configuration."""
 
@@ -114,12 +125,8 @@ class CompiledTick:
     def _tick_args(
         self, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
-        ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
-        front = self._front_args(terms, inputs)
         return (
-            *front[:10], _ZERO3 if ft is None else ft.torque, ft is not None,
-            _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
-            _NO_POINTS if obs is None else obs.points,
+            *self._front_args(terms, inputs)[:9], *_reading_args(inputs),
             _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
         )
 
@@ -127,11 +134,8 @@ class CompiledTick:
         self, s_star: float, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec, stopping: bool, R_E0: Mat,
         may_admit: bool,
     ) -> tuple[object, ...]:
-        ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
         return (
-            self._buf, s_star, _ZERO3 if ft is None else ft.force, _ZERO3 if ft is None else ft.torque, ft is not None,
-            _NO_TACTILE if tactile is None else tactile.values, tactile is not None,
-            _NO_POINTS if obs is None else obs.points, extra.W, extra.points, extra.D, extra.task_F,
+            self._buf, s_star, *_reading_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
             _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
             self.params,
         )
