@@ -8,13 +8,22 @@ saturating ticks, replayed through the compiled step (the exact QP, :func:`~lapw
 and through the old per-joint clamp with the same call signature, interleaved. Everything is
 timed in the same run; the ratios are the machine-independent figures. Last line: one JSON object.
 
+The ticks run in blocks of 1000 that alternate between two settings, so both see the same machine:
+``plain`` (the cyclic garbage collector on, normal scheduling) and ``loop`` (what the 1 kHz loop
+does, :meth:`lapwrench.loop.ControlLoop.run` and :mod:`lapwrench.hardware.rt`: the collector frozen and
+off, SCHED_FIFO when permitted). ``tick_p50_us``/``tick_p99_us`` are the ``loop`` figures, the
+setting the tick runs under on a robot; ``plain_*`` are the others. computeAllTerms is timed under
+the ``loop`` setting too.
+
     python bench/tick.py [--ticks N] [--robot panda|fr3|ur5|xarm7]
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -23,6 +32,7 @@ import pinocchio as pin
 
 from lapwrench.config import Config, load
 from lapwrench.controller import Controller
+from lapwrench.hardware.rt.options import RtOptions, apply_realtime
 from lapwrench.jit import bind, kernel
 from lapwrench.motion.reference_shaper import advance_reference
 from lapwrench.robot_kinds import ROBOT_KINDS
@@ -60,6 +70,7 @@ class Variant:
     ctrl: Controller
     push_n: float
     tick_ns: list[int] = field(default_factory=list)
+    plain_ns: list[int] = field(default_factory=list)
     active: int = 0
     saturating: list[tuple[SaturationInputs, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
 
@@ -81,9 +92,38 @@ def _frame(v: Variant, k: int, rng: np.random.Generator, tactile: TactileReading
     )
 
 
-def time_interleaved(cfg: Config, ticks: int) -> dict[str, Variant]:
+BLOCK = 1000  # ticks per block; the blocks alternate between the plain and the loop setting
+
+
+class LoopSetting:
+    """Switch between the plain setting and the 1 kHz loop's (collector frozen and off, SCHED_FIFO
+    when permitted); :attr:`problems` says what was not permitted."""
+
+    def __init__(self) -> None:
+        self.problems: list[str] = []
+        self._fifo = False
+
+    def enter(self) -> None:
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        if not self._fifo:
+            self.problems = apply_realtime(RtOptions(fifo_priority=80, warn=False))
+            self._fifo = not self.problems
+
+    def leave(self) -> None:
+        gc.unfreeze()
+        gc.enable()
+        if self._fifo:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            self._fifo = False
+
+
+def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> dict[str, Variant]:
     """Two controllers ticked in turn, so a machine that speeds up or slows down affects both alike:
-    a light hand, and a 30 N axial push (the push run keeps its saturating ticks' inputs)."""
+    a light hand, and a 30 N axial push (the push run keeps its saturating ticks' inputs). Blocks of
+    :data:`BLOCK` ticks alternate between the plain and the loop setting; each setting gets ``ticks``
+    timed ticks after 1000 untimed ones."""
     variants = {}
     for name, push in (("tick", 0.0), ("push", 30.0)):
         ctrl = Controller(cfg)
@@ -92,7 +132,12 @@ def time_interleaved(cfg: Config, ticks: int) -> dict[str, Variant]:
     rngs = {name: np.random.default_rng(0) for name in variants}
     tactile = TactileReading(np.full(64, 62.5))
     clock = time.perf_counter_ns
-    for k in range(ticks + 1000):
+    blocks = 1 + 2 * -(-ticks // BLOCK)  # one untimed warm-up block, then plain/loop pairs
+    for k in range(blocks * BLOCK):
+        block, timed = divmod(k, BLOCK)[0], k >= BLOCK
+        in_loop = block % 2 == 0
+        if k % BLOCK == 0:
+            setting.enter() if in_loop else setting.leave()
         for name, v in variants.items():
             frame = _frame(v, k, rngs[name], tactile)
             ref = v.ctrl.ref
@@ -101,7 +146,9 @@ def time_interleaved(cfg: Config, ticks: int) -> dict[str, Variant]:
             t0 = clock()
             res = v.ctrl.tick(frame)
             dt_ns = clock() - t0
-            if k >= 1000:
+            if timed and not in_loop:
+                v.plain_ns.append(dt_ns)
+            elif timed:
                 v.tick_ns.append(dt_ns)
                 v.active += bool(res.limits_active)
                 if res.limits_active and name == "push" and len(v.saturating) < 5000:
@@ -142,10 +189,19 @@ def main() -> None:
         ap.error("--ticks must be at least 100")
 
     cfg = load().replace(robot={"kind": args.robot})
-    variants = time_interleaved(cfg, args.ticks)
+    setting = LoopSetting()
+    try:
+        _run(args, cfg, setting)
+    finally:
+        setting.leave()
+
+
+def _run(args: argparse.Namespace, cfg: Config, setting: LoopSetting) -> None:
+    variants = time_interleaved(cfg, args.ticks, setting)
+    setting.enter()  # computeAllTerms and the saturation replays under the loop's setting
     ctrl = variants["tick"].ctrl
     tick_ns, push_ns = variants["tick"].tick_ns, variants["push"].tick_ns
-    push_active = variants["push"].active / args.ticks
+    push_active = variants["push"].active / len(push_ns)
     recorded = variants["push"].saturating
     if not recorded:
         raise SystemExit("bench/tick.py: the push run never reached a limit; nothing to time the saturation on")
@@ -163,13 +219,16 @@ def main() -> None:
             cat_ns.append(dt_ns)
 
     tick50, tick99 = percentiles_us(tick_ns)
+    plain50, plain99 = percentiles_us(variants["tick"].plain_ns)
     cat50, cat99 = percentiles_us(cat_ns)
     push50, push99 = percentiles_us(push_ns)
     step50, step99 = percentiles_us(step_ns)
     cstep50, cstep99 = percentiles_us(clamp_step_ns)
     added = step99 - cstep99
-    print(f"robot: {args.robot}, ticks: {args.ticks}")
-    print(f"controller tick      p50 {tick50:8.1f} us   p99 {tick99:8.1f} us")
+    fifo = "SCHED_FIFO 80" if not setting.problems else "normal scheduling (" + "; ".join(setting.problems)[:80] + ")"
+    print(f"robot: {args.robot}, ticks: {len(tick_ns)} per setting; loop setting: collector frozen, {fifo}")
+    print(f"controller tick      p50 {tick50:8.1f} us   p99 {tick99:8.1f} us (loop setting)")
+    print(f"controller tick      p50 {plain50:8.1f} us   p99 {plain99:8.1f} us (plain: collector on, normal sched.)")
     print(f"computeAllTerms      p50 {cat50:8.1f} us   p99 {cat99:8.1f} us")
     print(f"ratio tick/CAT       p50 {tick50 / cat50:8.1f} x    p99 {tick99 / cat99:8.1f} x")
     print(f"30 N axial push      p50 {push50:8.1f} us   p99 {push99:8.1f} us ({push_active:.0%} of ticks at a limit)")
@@ -182,8 +241,11 @@ def main() -> None:
         json.dumps(
             {
                 "robot": args.robot,
+                "sched_fifo": not setting.problems,
                 "tick_p50_us": round(tick50, 2),
                 "tick_p99_us": round(tick99, 2),
+                "plain_tick_p50_us": round(plain50, 2),
+                "plain_tick_p99_us": round(plain99, 2),
                 "compute_all_terms_p50_us": round(cat50, 2),
                 "compute_all_terms_p99_us": round(cat99, 2),
                 "tick_over_cat_p50_x": round(tick50 / cat50, 2),
