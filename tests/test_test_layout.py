@@ -16,17 +16,8 @@ TESTS = ROOT / "tests"
 # Modules without a test file of their own, each with the reason. Keep this short: a module leaves the
 # list when its test file appears (the stale-entry check below insists).
 UNTESTED: dict[str, str] = {
-    # hardware entry points, exercised end to end by tests/hardware/test_cli.py and the integration suites
-    "hardware/run_inprocess.py": "the in-process run path: tests/hardware/test_cli.py (dry run)",
-    "hardware/run_rt.py": "the real-time run path: tests/hardware/test_rt_process.py",
-    "hardware/frankysim.py": "the franky-sim server: tests/hardware/test_faults.py, test_frankysim_e2e.py",
-    "hardware/rt/child.py": "the child process's main: tests/hardware/test_rt_process.py",
-    "hardware/rt/factories.py": "robot factories of the child: tests/hardware/test_rt_process.py",
-    "hardware/rt/parent.py": "RtProcess: tests/hardware/test_rt_process.py",
     # perception pieces exercised through the detectors and the CLI
     "perception/train.py": "training needs the training venv (torch, ultralytics)",
-    # the rest
-    "tick_core.py": "the compiled tick: tests/test_compiled_tick.py, tests/test_controller.py",
 }
 
 # Test files that are not about one module (tests/README.md says why).

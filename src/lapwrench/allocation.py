@@ -76,7 +76,12 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     condition number reaches 1e10, and only the same algorithm gives the printed formula's value
     to 1e-9 there. Below :data:`CHOLESKY_CONDITION`, where both agree to round-off, the cheaper
     Cholesky inverse is kept.)
+
+    A non-finite A gives a NaN matrix (for the tick's non-finite guard), never an exception.
     """
+    for v in A.flat:
+        if not math.isfinite(v):
+            return np.full(A.shape, np.nan)
     A_inv, ok = cholesky_inverse(A)
     if ok and _frobenius_condition(A, A_inv) <= CHOLESKY_CONDITION:
         return A_inv  # well conditioned: Cholesky and LU agree to round-off, the factor is cheaper

@@ -25,6 +25,7 @@ import contextlib
 import errno
 import fcntl
 import json
+import math
 import os
 import signal
 import socket
@@ -310,9 +311,16 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--stats", help="write per-step compute time statistics (JSON) here on exit")
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     a = p.parse_args(argv)
-    q0 = None if a.q0 is None else tuple(float(v) for v in a.q0.split(","))
-    if q0 is not None and len(q0) != n:
-        p.error(f"--q0 needs {n} values")
+    q0 = None
+    if a.q0 is not None:
+        try:
+            q0 = tuple(float(v) for v in a.q0.split(","))
+        except ValueError:
+            p.error(f"--q0 needs {n} comma-separated numbers, got {a.q0!r}")
+        if len(q0) != n:
+            p.error(f"--q0 needs {n} values")
+        if not all(math.isfinite(v) for v in q0):
+            p.error(f"--q0 needs finite values, got {a.q0!r}")
     _serve(q0, a.stats, not a.no_realtime)
 
 

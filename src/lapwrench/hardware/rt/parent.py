@@ -96,6 +96,7 @@ class RtProcess:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._drain_lock = threading.Lock()
+        self._closed = False
 
     @property
     def bus_name(self) -> str:
@@ -119,15 +120,21 @@ class RtProcess:
             RtProcessError: it failed or died (``kind`` in ``.kind``: robot, device, internal, died).
         """
         parent_conn, child_conn = self.ctx.Pipe()
-        self._conn = parent_conn
-        self.proc = self.ctx.Process(
+        proc = self.ctx.Process(
             target=_child_main,
             args=(self.spec, self.bus.name, child_conn, self.peers()),
             name="lapwrench-rt",
             daemon=True,
         )
         self.bus["beat"][BEAT_PARENT] = time.monotonic()
-        self.proc.start()
+        try:
+            proc.start()  # spawn pickles the spec: a factory that does not pickle fails here
+        except Exception as exc:
+            parent_conn.close()
+            child_conn.close()
+            why = f"{type(exc).__name__}: {exc}"
+            raise _error("internal", f"the real-time process could not be started: {why}") from exc
+        self.proc, self._conn = proc, parent_conn  # only a started process: close() joins it
         child_conn.close()
         self._start_threads()
         deadline = time.monotonic() + timeout
@@ -137,6 +144,8 @@ class RtProcess:
                 if msg[0] == "ready":
                     self.ready = msg[1]
                     return self.ready
+                if msg[0] == "error" and msg[1] == "died":
+                    raise self._died("during start-up")
                 self._raise_child_error(msg)
             if self.proc.exitcode is not None:
                 raise self._died("during start-up")
@@ -192,11 +201,14 @@ class RtProcess:
         if self.proc is None:
             self.start()
         self._t_go = time.monotonic()
-        self._conn.send(("go", script_t0, self.spec.duration if duration is None else duration))
         ctl, beat = self.bus["ctl"], self.bus["beat"]
         stop_sent: float | None = None
         running_since: float | None = None
         try:
+            try:
+                self._conn.send(("go", script_t0, self.spec.duration if duration is None else duration))
+            except OSError:  # it ended while it waited for the go (a stop request, a signal): nothing runs
+                raise self._died("before the go") from None
             while True:
                 if stop_event is not None and stop_sent is None and stop_event.is_set():
                     ctl[CTL_STOP] = 1
@@ -343,7 +355,11 @@ class RtProcess:
             self.proc.join(5.0)
 
     def close(self, timeout: float = 10.0) -> None:
-        """Stop the child (stop request, then SIGTERM, then SIGKILL), the threads, and free the bus."""
+        """Stop the child (stop request, then SIGTERM, then SIGKILL), the threads, and free the bus.
+        A second call does nothing."""
+        if self._closed:
+            return
+        self._closed = True
         if self.proc is not None and self.proc.exitcode is None:
             self.request_stop()
             if self._conn is not None:

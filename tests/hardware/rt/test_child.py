@@ -1,0 +1,129 @@
+"""lapwrench.hardware.rt.child: the real-time child's own promises, through the RtProcess that spawns it.
+
+* whatever fails in the child is reported on the pipe (a device error as such, anything else as internal
+  with its traceback), never a silent death;
+* it ignores SIGINT (the terminal sends it to the whole process group: the parent asks for the stop)
+  and takes its own SIGTERM as a stop request: the loop stops to rest, the report names the signal;
+* its report carries its per-cycle hooks' counts and whatever the spec's ``loop_hook`` reports.
+
+The faults of the helpers it watches (feeder, detector, corrupt slots) are test_rt_process.py's.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from hardware.support import rt_process, rt_spec
+
+from lapwrench.config import Config
+from lapwrench.drivers.base import DeviceError
+from lapwrench.hardware.rt import CTL_CYCLES, CTL_PHASE, PHASE_DONE, PHASE_RUNNING, RtProcessError
+
+
+class DeviceProbe:
+    """``RtSpec.loop_hook``: built on the child's loop, reports what it saw there."""
+
+    def __init__(self, loop: Any) -> None:
+        self.robot = loop.robot.device
+
+    def report(self) -> dict[str, Any]:
+        return {"probe_robot": self.robot, "probe_pid": os.getpid()}
+
+
+def absent_device(cfg: Any, script: Any) -> Any:
+    """A robot factory whose device is not there."""
+    raise DeviceError("udp://192.0.2.2:49152", "no answer within 1 s")
+
+
+def wait_for(cond: Callable[[], bool], timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def test_a_failure_before_the_loop_is_reported_with_its_traceback(panda_cfg: Config) -> None:
+    """Here the child cannot map the bus the spec describes (a spec changed after the bus was made)."""
+    rp = rt_process(rt_spec(panda_cfg))
+    try:
+        rp.spec.log_rows *= 64  # the child's layout no longer fits the block the parent created
+        with pytest.raises(RtProcessError) as err:
+            rp.start(timeout=120.0)
+        rp.proc.join(30.0)
+        assert rp.proc.exitcode == 0  # it reported and ended, not a crash
+    finally:
+        rp.close()
+    msg = str(err.value)
+    assert err.value.kind == "internal"  # type: ignore[attr-defined]
+    assert "ShmError" in msg and "the layout needs" in msg and "Traceback" in msg
+
+
+@pytest.mark.slow  # the child builds the controller first
+def test_a_device_error_keeps_its_kind(panda_cfg: Config) -> None:
+    """The command line names a device problem (exit 2) apart from a robot problem (exit 3; that kind is
+    test_rt_process.py's robot that fails to connect)."""
+    rp = rt_process(rt_spec(panda_cfg, robot_factory=absent_device))
+    try:
+        with pytest.raises(RtProcessError) as err:
+            rp.start(timeout=180.0)
+        rp.proc.join(30.0)
+        assert rp.proc.exitcode == 0  # it reported and ended
+    finally:
+        rp.close()
+    assert err.value.kind == "device"  # type: ignore[attr-defined]
+    assert str(err.value) == "udp://192.0.2.2:49152: no answer within 1 s"
+
+
+@pytest.mark.slow  # a real-time child on the simulated robot
+def test_sigint_is_ignored_and_sigterm_stops_the_loop_to_rest(panda_cfg: Config) -> None:
+    spec = rt_spec(panda_cfg, tactile=False, loop_hook=DeviceProbe)
+    rp = rt_process(spec)
+    guard = threading.Event()  # the test's own bound: a child that ignored SIGTERM is stopped all the same
+    signalled: list[str] = []
+
+    def signals() -> None:
+        ctl = rp.bus["ctl"]
+        if not wait_for(lambda: ctl[CTL_PHASE] == PHASE_RUNNING, 120.0):
+            return
+        os.kill(rp.pid, signal.SIGINT)
+        signalled.append("SIGINT")
+        at = int(ctl[CTL_CYCLES])
+        # the loop goes on after the SIGINT (or has ended: then the test fails below)
+        if wait_for(lambda: ctl[CTL_CYCLES] >= at + 200 or ctl[CTL_PHASE] == PHASE_DONE, 60.0):
+            os.kill(rp.pid, signal.SIGTERM)
+            signalled.append("SIGTERM")
+
+    try:
+        ready = rp.start()
+        assert ready["pid"] == rp.pid != os.getpid() and ready["robot"] == "simulated panda (MuJoCo)"
+        assert ready["devices"] == {} and ready["rt_problems"] == []
+        sender = threading.Thread(target=signals, daemon=True)
+        sender.start()
+        safety = threading.Timer(180.0, guard.set)
+        safety.daemon = True
+        safety.start()
+        res = rp.run(None, guard)  # no duration: only a stop ends it
+        safety.cancel()
+        sender.join(5.0)
+        rp.proc.join(30.0)
+        assert rp.proc.exitcode == 0
+    finally:
+        rp.close()
+    assert signalled == ["SIGINT", "SIGTERM"] and not guard.is_set()
+    st, report = res.stats, res.report
+    assert report["stop_signal"] == "SIGTERM"
+    assert st.alarm is None and st.stopped_at_rest and st.cycles > 200
+    # the per-cycle hooks: one call a cycle, no F/T to count, no peer fault, no shared inputs
+    assert report["hook_cycles"] >= st.cycles and report["ft_fresh_cycles"] == 0 == report["ft_datagrams"]
+    assert report["peer_fault"] is None and report["torn_reads"] == {}
+    assert report["log_dropped"] == 0 and report["encode_errors"] == 0
+    # the spec's loop hook ran in the child, on its loop, and its report was merged
+    assert report["probe_robot"] == "simulated panda (MuJoCo)" and report["probe_pid"] == rp.pid
