@@ -38,7 +38,10 @@ class VideoWriter:
             raise ValueError(f"video fps must be a positive number, got {fps!r}")
         self.path = path
         self.cfg = cfg
-        self._w = imageio.get_writer(path, fps=fps, codec="libx264", quality=6, macro_block_size=16)
+        # x264's veryfast preset: 8 ms of CPU a 640x480 frame instead of 18 ms with the default (medium),
+        # for a file no larger (2026-12-02); the encoder shares the cores with the simulation
+        self._w = imageio.get_writer(path, fps=fps, codec="libx264", quality=6, macro_block_size=16,
+                                     ffmpeg_params=["-preset", "veryfast"])
 
     def add(self, frame: np.ndarray, label: str) -> None:
         self._w.append_data(annotate_frame(frame, self.cfg, label))
