@@ -79,3 +79,22 @@ def test_the_drawer_sends_only_the_bodies_that_moved(model: mujoco.MjModel) -> N
         assert drawer.update(moved, colors) == 1
     finally:
         server.stop()
+
+
+def test_a_drift_below_a_pixel_is_sent_once_it_adds_up(model: mujoco.MjModel) -> None:
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        data = mujoco.MjData(model)
+        mujoco.mj_kinematics(model, data)
+        drawer = SceneDrawer(server, model, data)
+        colors = {"rcm": cue_color("rcm", 0)}
+        snap = snapshot(model, data)
+        drawer.update(snap, colors)
+        sent = []
+        for _ in range(10):  # 0.05 mm a frame: invisible alone, 0.5 mm in all
+            data.xpos[3, 0] += 5e-5
+            sent.append(drawer.update(snapshot(model, data), colors))
+        assert 0 < sum(sent) < len(sent)  # not every frame, but not never
+        assert abs(drawer._frames[3].position[0] - data.xpos[3, 0]) < 2.5e-4  # never far behind
+    finally:
+        server.stop()

@@ -9,7 +9,7 @@ import pytest
 
 from lapwrench.config import Config
 from lapwrench.ui.session import Session, Snapshot
-from lapwrench.ui.view import LaparoscopeView, annotate, view_size
+from lapwrench.ui.view import LaparoscopeView, annotate, next_due, view_size
 
 
 def test_view_size_scales_the_camera_image(cfg: Config) -> None:
@@ -36,6 +36,12 @@ def test_annotate_draws_the_deadbands_and_detections_at_the_frames_scale(cfg: Co
     boxed = annotate(frame, cfg, snap)
     assert (boxed[50, 50:71] == (0, 255, 0)).all()  # the box's top edge, at half scale
     assert (boxed[60, 60] == (255, 0, 0)).all()  # the tracking point
+
+
+def test_frames_are_due_at_a_fixed_rate_and_a_late_one_restarts_the_count() -> None:
+    assert next_due(1.0, 0.04, now=1.01) == pytest.approx(1.04)  # on time: one period later
+    assert next_due(1.0, 0.04, now=1.05) == pytest.approx(1.04)  # a little late: due at once, rate kept
+    assert next_due(1.0, 0.04, now=1.2) == 1.2  # far behind: from now, no burst of frames
 
 
 def test_bad_view_settings_are_refused(cfg: Config) -> None:

@@ -2,10 +2,10 @@
 
 Three threads besides viser's own: the sim thread (:class:`~lapwrench.ui.runner.RealTimeRunner`,
 the 1 kHz ticks at wall-clock pace), the view thread (:class:`~lapwrench.ui.view.LaparoscopeView`,
-the laparoscope frames) and the page thread (:meth:`UiApp.run_forever` or :meth:`UiApp.start`),
-which draws the latest snapshot into the scene at :data:`PAGE_HZ`, refreshes the plots at
-:data:`PLOT_HZ` and the status line. The page thread never steps the simulation, so a slow browser
-slows the page, not the control loop.
+the laparoscope frames, each sent to the page as it comes, at the view's own frame rate) and the
+page thread (:meth:`UiApp.run_forever` or :meth:`UiApp.start`), which draws the latest snapshot
+into the scene at :data:`PAGE_HZ`, refreshes the plots at :data:`PLOT_HZ` and the status line.
+Neither steps the simulation, so a slow browser slows the page, not the control loop.
 """
 
 from __future__ import annotations
@@ -24,11 +24,10 @@ from lapwrench.ui.plots import LivePlots, plot_specs
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.scene import SceneDrawer, cue_color
 from lapwrench.ui.session import Session
-from lapwrench.ui.view import LaparoscopeView, view_size
+from lapwrench.ui.view import RENDER_NICE, LaparoscopeView, view_size
 
 PAGE_HZ = 20.0  # scene updates per second
 PLOT_HZ = 4.0  # status line and plot refreshes per second
-KEEPING_UP = 0.95  # real-time factor below which the view lowers its frame rate
 
 
 @dataclass(frozen=True)
@@ -73,11 +72,14 @@ class UiApp:
             self.plots = LivePlots(gui, self.session.history, plot_specs(names, self.cue_colors))
         panel.dock_left()
         panel.set_width(400)
+        # The render process runs RENDER_NICE below the sim thread's priority: behind the simulation,
+        # but level with the browser when the sim thread was granted its higher priority.
         self.view = LaparoscopeView(self.session, fps=opts.view_fps, scale=opts.view_scale,
-                                    keeping_up=lambda: not self.runner.rtf < KEEPING_UP)
+                                    on_image=self._show_image, keeping_up=self.runner.kept_up,
+                                    render_nice=lambda: (self.runner.nice or 0) + RENDER_NICE)
         self.session.on_tick.append(self.view.on_tick)
         self.page_frames = 0
-        self._shown_frame = -1
+        self.images_sent = 0  # view images sent to the page
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -135,15 +137,12 @@ class UiApp:
             time.sleep(max(0.0, period - (time.perf_counter() - t0)))
 
     def draw(self, slow: bool = True) -> None:
-        """One page update: the scene and the view image; with ``slow``, the status line and the plots
+        """One page update: the scene; with ``slow``, the status line and the plots
         too (each a React re-render on the page, costly on a software-rendered browser)."""
         snap = self.session.snapshot
         if snap is not None:
             with self.server.atomic():
                 self.scene.update(snap, self.cue_colors)
-        if self.view.frames != self._shown_frame and self.view.image is not None:
-            self._shown_frame = self.view.frames
-            self.image.image = self.view.image
         if snap is not None:
             self.controls.follow_handle(snap)
         if slow:
@@ -153,6 +152,12 @@ class UiApp:
             self.params.show_applied()
             self.plots.refresh()
         self.page_frames += 1
+
+    # -- the view thread -----------------------------------------------------------------------
+    def _show_image(self, image: np.ndarray) -> None:
+        """Send a new laparoscope frame to the page (JPEG-encoded by viser; runs on the view thread)."""
+        self.image.image = image
+        self.images_sent += 1
 
     def stats(self) -> dict[str, Any]:
         """Figures for the command line and the tests: real-time factor, per-tick wall time, view fps."""

@@ -29,7 +29,11 @@ HAND_COLOR = (230, 60, 60)
 TROCAR_COLOR = (250, 170, 30)
 _KNOWN_CUE_COLORS = {"rcm": (60, 200, 90), "interaction": (60, 120, 240), "tracking": (200, 60, 220),
                      "viscous": (150, 150, 150)}
-_MOVED = 1e-5  # m or quaternion units: smaller changes are not sent
+# A pose is re-sent when it moved more than this since it was last sent (m, or quaternion units:
+# 0.2 mm, about 0.02°), well below a pixel of the page's scene; each update sent costs the browser
+# a WebGL frame (software-rendered on a machine without a GPU), and a slow drift is still sent
+# once it adds up to this.
+_MOVED = 2e-4
 
 
 def cue_color(name: str, index: int) -> tuple[int, int, int]:

@@ -31,12 +31,13 @@ MIN_FPS = 5.0  # the view's lowest frame rate when the simulation falls behind
 RENDER_NICE = 5  # the render process's niceness above the simulation's: on a busy machine frames wait
 
 
-def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> None:
+def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection, nice: int = RENDER_NICE) -> None:
     """The render process: builds the scene of ``cfg_data`` (a config as a mapping), then for each
     (qpos, mocap_pos, mocap_quat) received renders the laparoscope view (the arm hidden) at ``scale``
     times the camera's size and sends the RGB bytes back; None ends it. Software GL (llvmpipe) is
-    kept to one thread: the other core runs the simulation. Ctrl-C is the parent's to handle (it ends
-    this process with None); a parent that is gone (end of the pipe) ends it too, quietly."""
+    kept to one thread: the other core runs the simulation. The process runs at niceness ``nice``
+    (if that is not below its own). Ctrl-C is the parent's to handle (it ends this process with
+    None); a parent that is gone (end of the pipe) ends it too, quietly."""
     import os
     import signal
 
@@ -44,7 +45,7 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
     os.environ.setdefault("MUJOCO_GL", "egl")
     os.environ.setdefault("LP_NUM_THREADS", "1")
     with contextlib.suppress(OSError):  # when the two compete for a core, the simulation goes first
-        os.nice(RENDER_NICE)
+        os.setpriority(os.PRIO_PROCESS, 0, max(nice, os.getpriority(os.PRIO_PROCESS, 0)))
     import mujoco
 
     from lapwrench.sim.offscreen import make_renderer, scope_view_option
@@ -69,6 +70,14 @@ def render_worker(cfg_data: dict[str, Any], scale: float, conn: Connection) -> N
         pass
     finally:
         renderer.close()
+
+
+def next_due(due: float, period: float, now: float) -> float:
+    """When the frame after the one due at ``due`` is due (s): one ``period`` later, so that the frame
+    rate holds however long each frame took; a frame later than a whole period starts the count
+    again from ``now`` (no burst of frames to catch up)."""
+    due += period
+    return due if due > now - period else now
 
 
 def view_size(cfg: Config, scale: float) -> tuple[int, int]:
@@ -101,13 +110,15 @@ def annotate(frame: np.ndarray, cfg: Config, snapshot: Snapshot | None) -> np.nd
 class LaparoscopeView:
     """Annotated laparoscope frames of a session at up to ``fps`` (register :meth:`on_tick` in
     ``session.on_tick``, then :meth:`start`). ``on_image`` is called with each new frame (on this
-    view's thread). Frames are rendered at ``scale`` times the camera's size. While ``keeping_up()``
+    view's thread). Frames are rendered at ``scale`` times the camera's size, in a process of
+    niceness ``render_nice()`` (asked when it starts). While ``keeping_up()``
     is false (the simulation runs slower than real time) the frame rate is halved, down to
     :data:`MIN_FPS`, and it climbs back toward ``fps`` once it is true again."""
 
     def __init__(self, session: Session, fps: float = 25.0, scale: float = 0.5,
                  on_image: Callable[[np.ndarray], None] | None = None,
-                 keeping_up: Callable[[], bool] | None = None) -> None:
+                 keeping_up: Callable[[], bool] | None = None,
+                 render_nice: Callable[[], int] = lambda: RENDER_NICE) -> None:
         if not (0.0 < fps <= 60.0):
             raise ValueError(f"view fps must be in (0, 60], got {fps}")
         if not (0.1 <= scale <= 1.0):
@@ -116,6 +127,7 @@ class LaparoscopeView:
         self.fps = float(fps)
         self.scale = float(scale)
         self.keeping_up = keeping_up
+        self.render_nice = render_nice
         self.rate = self.fps  # the frame rate aimed at now: lowered while the simulation falls behind
         self.on_image = on_image
         self.frames = 0
@@ -170,7 +182,8 @@ class LaparoscopeView:
     def _start_renderer(self) -> None:
         ctx = mp.get_context("spawn")  # no fork of a threaded process with GL state
         parent, child = ctx.Pipe()
-        process = ctx.Process(target=render_worker, args=(to_dict(self.session.cfg), self.scale, child),
+        args = (to_dict(self.session.cfg), self.scale, child, self.render_nice())
+        process = ctx.Process(target=render_worker, args=args,
                               name="lapwrench-ui-render", daemon=True)
         process.start()
         self._process = process  # only a started process: _run joins it
@@ -214,8 +227,8 @@ class LaparoscopeView:
 
     def _loop(self) -> None:
         t_window, n_window = time.perf_counter(), 0
+        due = t_window  # when the next frame is due: a fixed rate, not a pause after each frame
         while not self._stop.is_set():
-            t0 = time.perf_counter()
             self._have.clear()
             self._want.set()
             if not self._have.wait(1.0) or self._stop.is_set():
@@ -236,4 +249,5 @@ class LaparoscopeView:
                 self.measured_fps = n_window / (now - t_window)
                 t_window, n_window = now, 0
                 self._adapt()
-            time.sleep(max(0.0, 1.0 / self.rate - (time.perf_counter() - t0)))
+            due = next_due(due, 1.0 / self.rate, time.perf_counter())
+            time.sleep(max(0.0, due - time.perf_counter()))
