@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from lapwrench.jit import kernel
-from lapwrench.spatial import Mat, Vec, cholesky_inverse, matmul, matvec
+from lapwrench.spatial import Mat, Vec, all_finite, cholesky_inverse, matmul, matvec
 
 # Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
 RCOND = 1e-10
@@ -79,9 +79,8 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
 
     A non-finite A gives a NaN matrix (for the tick's non-finite guard), never an exception.
     """
-    for v in A.flat:
-        if not math.isfinite(v):
-            return np.full(A.shape, np.nan)
+    if not all_finite(A.ravel()):
+        return np.full(A.shape, np.nan)
     A_inv, ok = cholesky_inverse(A)
     if ok and _frobenius_condition(A, A_inv) <= CHOLESKY_CONDITION:
         return A_inv  # well conditioned: Cholesky and LU agree to round-off, the factor is cheaper

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from lapwrench.jit import kernel
+from lapwrench.spatial import all_finite
 
 CONTROL_DT = 0.001
 
@@ -35,15 +36,6 @@ _BAD_STATE = 4
 _BAD_WARNING = 5
 _BAD_DEPTH = 6
 _BAD_FORCE = 7
-
-
-@kernel
-def _all_finite(x: np.ndarray) -> bool:
-    """``np.all(np.isfinite(x))`` for a 1-D array."""
-    for v in x:  # noqa: SIM110 (a plain loop compiles to the tightest code)
-        if not math.isfinite(v):
-            return False
-    return True
 
 
 # Rows of the per-joint constant table and of the tick's work table (arguments of the kernels).
@@ -88,9 +80,9 @@ def _begin_tick(
     the last ``mj_forward`` still hold for the current state, else ``_OK_FULL``.
     """
     n = q_ref.size
-    if not _all_finite(q_ref):
+    if not all_finite(q_ref):
         return _BAD_Q_REF
-    if use_dq_ref and not _all_finite(dq_ref):
+    if use_dq_ref and not all_finite(dq_ref):
         return _BAD_DQ_REF
     q_prev = work[_W_Q_REF_PREV]
     kv_over_kp = const[_C_KV_OVER_KP]
@@ -98,7 +90,7 @@ def _begin_tick(
         dq = dq_ref[i] if use_dq_ref else (q_ref[i] - q_prev[i]) / CONTROL_DT
         ctrl[idx[0, i]] = q_ref[i] + kv_over_kp[i] * dq
         q_prev[i] = q_ref[i]
-    if not (_all_finite(qpos) and _all_finite(qvel)):
+    if not (all_finite(qpos) and all_finite(qvel)):
         return _BAD_STATE
     for i in range(n):
         v = qvel[idx[1, i]]
@@ -198,7 +190,7 @@ def _end_tick(
     for i in range(warn.shape[1]):
         if warn_number[warn[0, i]] != warn[1, i]:
             return _BAD_WARNING
-    if not (_all_finite(qpos) and _all_finite(qvel)):
+    if not (all_finite(qpos) and all_finite(qvel)):
         return _BAD_STATE
     body_E, body_incision = ids[0], ids[1]
     depth = 0.0

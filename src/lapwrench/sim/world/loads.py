@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from lapwrench.sim.scene.instruments import instrument_pose_through_port
-from lapwrench.sim.world.kernels import _all_finite
+from lapwrench.spatial import all_finite
 
 _NO_LOAD = (0.0, 0.0, 0.0)
 
@@ -65,7 +65,7 @@ class WorldLoads:
     def set_housing_load(self, force: np.ndarray) -> None:
         """Sustained force (N, base frame) on the phantom housing (only x, y move it)."""
         f = np.asarray(force, float)
-        if f.shape != (3,) or not _all_finite(f):
+        if f.shape != (3,) or not all_finite(f):
             raise ValueError(f"housing load must be 3 finite numbers, got {force!r}")
         self._xfrc_applied[self._body_housing, :3] = f
 
