@@ -43,7 +43,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import lapwrench
 from lapwrench import config
+from lapwrench.cli_types import float_in
 from lapwrench.sim.world import CONTROL_DT
+from lapwrench.ui.playback import PLAYABLE
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
@@ -242,12 +244,14 @@ def ui_run(cfg: config.Config, seconds: float, warmup: float, browser: bool, sce
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seconds", type=float, default=20.0, help="measured window of each UI run (wall s)")
-    p.add_argument("--warmup", type=float, default=5.0, help="wall s before the window (after the first frame)")
-    p.add_argument("--ref-seconds", type=float, default=3.0, help="wall s of each reference run")
+    p.add_argument("--seconds", type=float_in(1.0, 3600.0), default=20.0,
+                   help="measured window of each UI run (wall s)")
+    p.add_argument("--warmup", type=float_in(0.0, 600.0), default=5.0,
+                   help="wall s before the window (after the first frame)")
+    p.add_argument("--ref-seconds", type=float_in(0.5, 600.0), default=3.0, help="wall s of each reference run")
     p.add_argument("--browser", action="store_true", help="also a run with headless Chromium on the page")
     p.add_argument("--browser-only", action="store_true", help="only the run with Chromium")
-    p.add_argument("--scenario", default="workflow",
+    p.add_argument("--scenario", default="workflow", choices=["none", *PLAYABLE],
                    help="paper scenario played from the warm-up on, so the scene moves ('none': the scope at rest)")
     args = p.parse_args(argv)
     cfg = config.load()
@@ -281,4 +285,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # the page, its render process and the browser were stopped on the way out
+        print("bench/ui.py: interrupted; no figures", file=sys.stderr)
+        sys.exit(130)
