@@ -82,6 +82,22 @@ def test_roll_angle_is_the_twist_about_the_shaft_only() -> None:
     assert roll_angle(swing, R0) == pytest.approx(0.0, abs=1e-12)
 
 
+
+@pytest.mark.parametrize("eps", [0.0, 1e-13, 1e-7])
+def test_roll_angle_is_defined_with_the_shaft_turned_a_half_turn(eps: float) -> None:
+    """No shortest rotation exists from d_0 to -d_0 (within round-off; the compiled tick raised
+    ZeroDivisionError, NaN without the JIT): the half turn about the start x axis is taken,
+    then a twist of 0.3 rad about the shaft reads as 0.3."""
+    R0 = pin.rpy.rpyToMatrix(0.3, -0.2, 0.5)
+    x0, d0 = R0[:, 0], R0[:, 2]
+    tilt = np.cross(d0, x0)  # a swing of eps off the exact half turn, about the start y axis
+    flipped = pin.exp3(eps * tilt) @ pin.exp3(np.pi * x0) @ R0
+    d = flipped[:, 2]
+    assert 1.0 + d0 @ d < 1e-6
+    assert roll_angle(flipped, R0) == pytest.approx(0.0, abs=1e-3)
+    assert roll_angle(pin.exp3(0.3 * d) @ flipped, R0) == pytest.approx(0.3, abs=1e-3)
+
+
 def test_wall_speed_and_rate_bounds() -> None:
     assert wall_speed(0.02, 0.5, 1.0) == pytest.approx(np.sqrt(2 * 0.5 * 0.02))
     assert wall_speed(0.02, 0.5, 0.05) == 0.05  # capped by the speed limit

@@ -106,18 +106,25 @@ def insertion_rate_weights(d: Vec, r: Vec) -> Vec:
     return w
 
 
+ANTIPARALLEL = 1e-9  # 1 + d_0·d_z below which the shaft is taken as turned a half turn (roll_angle)
+
+
 @kernel
 def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     """Rotation (rad) of {E} about its shaft axis since ``R_E0`` (the twist of a swing-twist split).
 
     The start frame's x axis is carried by the shortest rotation taking the start axis d_0 to the
-    current d_z; the roll is the angle from that axis to the current x axis, about d_z.
+    current d_z; the roll is the angle from that axis to the current x axis, about d_z. With d_z
+    turned (within round-off) a half turn from d_0 no rotation is the shortest; the half turn about
+    the start x axis is taken, which leaves that axis where it was.
     """
     x0, d0, x, d = R_E0[:, 0], R_E0[:, 2], R_E[:, 0], R_E[:, 2]  # columns as views
+    c = 1.0 + inner(d0, d)
+    if c < ANTIPARALLEL:
+        return math.atan2(inner(cross3(x0, x), d), inner(x0, x))
     k = cross3(d0, d)
     kx0 = cross3(k, x0)
     kkx0 = cross3(k, kx0)
-    c = 1.0 + inner(d0, d)
     x0s = np.empty(3)
     for i in range(3):
         x0s[i] = x0[i] + kx0[i] + kkx0[i] / c
