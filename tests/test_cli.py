@@ -13,6 +13,7 @@ import pytest
 
 from lapwrench import cli_types
 from lapwrench.cli import main
+from lapwrench.hardware.log.topics import CYCLE_TOPIC
 
 ONNX_GARBAGE = b"not an onnx model"
 
@@ -260,3 +261,53 @@ def test_demo_refuses_a_foxglove_port_in_use_before_anything_runs(
                              str(tmp_path / "out")], capsys)
     assert code == 2 and f"--foxglove cannot listen on 127.0.0.1:{port}" in err and err.count("\n") == 1
     assert not (tmp_path / "out" / "report.md").exists()
+
+
+
+def _advertised_telemetry(port: int) -> list[str]:
+    """The cues the ``lapwrench.Telemetry`` part of the cycle channel's schema names, as a Foxglove
+    client connecting to ``port`` is told."""
+    import asyncio
+    import base64
+    import json
+
+    import websockets
+    from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+    async def advertised() -> bytes:
+        async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"]) as ws:
+            while True:
+                op = json.loads(await asyncio.wait_for(ws.recv(), 10.0))
+                if op["op"] == "advertise":
+                    return next(base64.b64decode(c["schema"]) for c in op["channels"] if c["topic"] == CYCLE_TOPIC)
+
+    (file,) = FileDescriptorSet.FromString(asyncio.run(advertised())).file
+    return [f.name for f in next(m for m in file.message_type if m.name == "Telemetry").field]
+
+
+def test_demo_foxglove_streams_the_cue_telemetry_of_its_configs_and_of_every_cue_type(
+    files: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``demo --foxglove`` serves the cue telemetry of both its configs (the tracking scenarios' own)
+    under their names, then of the cue types a scenario adds by type (zoom, keep_out); the
+    scenarios are replaced by a Foxglove client reading the cycle schema the server advertises."""
+    import re
+
+    from lapwrench.sim import demo
+
+    pytest.importorskip("websockets")
+    zone = "{type: keep_out, center: [0.9, 0.0, 0.1], radius: 0.05}"
+    (files / "base.yaml").write_text(f"cues:\n  near: {zone}\n")
+    (files / "track.yaml").write_text(f"cues:\n  far: {zone}\n")
+    seen: list[str] = []
+
+    def run_demo(plan: object, progress: bool) -> dict[str, object]:
+        port = int(re.findall(r"live telemetry for Foxglove on ws://127\.0\.0\.1:(\d+)", capsys.readouterr().err)[0])
+        seen.extend(_advertised_telemetry(port))
+        return {}
+
+    monkeypatch.setattr(demo, "run_demo", run_demo)
+    code, err = run_cli(["demo", "--scenarios", "grip", "workflow", "--config", "base.yaml", "--tracking-config",
+                         "track.yaml", "--detector", "projected", "--foxglove", "127.0.0.1:0", "--out", "out"], capsys)
+    assert code == 0, err
+    assert seen[:2] == ["near", "far"] and {"keep_out", "zoom"} <= set(seen)

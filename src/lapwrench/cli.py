@@ -118,16 +118,20 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     return 0
 
 
-def _live(address: tuple[str, int] | None, robot: str, command: str) -> contextlib.AbstractContextManager[object]:
-    """Live telemetry of the simulated runs while the block runs (nothing without an address); a port
+def _live(
+    address: tuple[str, int] | None, robot: str, command: str, configs: list[config_mod.Config]
+) -> contextlib.AbstractContextManager[object]:
+    """Live telemetry of the simulated runs while the block runs (nothing without an address), with the
+    cue telemetry of ``configs`` (the ones the runs use) and of every registered cue type; a port
     that cannot be served is a usage error, before anything runs."""
     if address is None:
         return contextlib.nullcontext()
     from lapwrench.hardware.log.live import LiveError
     from lapwrench.hardware.log.live_sim import live_simulation
+    from lapwrench.hardware.log.telemetry import simulation_layout
 
     try:
-        return live_simulation(address, robot, f"lapwrench {command}")
+        return live_simulation(address, robot, f"lapwrench {command}", simulation_layout(*(c.cues for c in configs)))
     except LiveError as exc:
         raise UsageError(f"--foxglove {exc}") from exc
 
@@ -153,7 +157,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     except DemoError as exc:  # a bad argument or input file, found before anything ran
         raise UsageError(str(exc)) from exc
     try:
-        with _live(args.foxglove, plan.robot, "demo"):
+        with _live(args.foxglove, plan.robot, "demo", list(plan.configs.values())):
             results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:  # a run that failed (FAILED.txt says why)
         print(f"lapwrench demo: {exc}", file=sys.stderr)

@@ -89,9 +89,11 @@ def ui_main(args: argparse.Namespace) -> int:
         if getattr(args, "foxglove", None) is not None:  # every loop the page builds is streamed
             from lapwrench.hardware.log.live import LiveError
             from lapwrench.hardware.log.live_sim import live_simulation
+            from lapwrench.hardware.log.telemetry import simulation_layout
 
             try:
-                stack.enter_context(live_simulation(args.foxglove, cfg.robot.kind, "lapwrench ui"))
+                layout = simulation_layout(cfg.cues)  # then every registered cue type, by its name
+                stack.enter_context(live_simulation(args.foxglove, cfg.robot.kind, "lapwrench ui", layout))
             except LiveError as exc:
                 print(f"lapwrench ui: --foxglove {exc}", file=sys.stderr)
                 return 2

@@ -4,6 +4,7 @@ named by the configured cues, bounded where the configuration is read (issue 13)
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import math
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,13 @@ from lapwrench.config_ranges import ConfigError
 from lapwrench.hardware import cli as hw
 from lapwrench.hardware.log import RunLogger, iter_messages, load_log, read_log
 from lapwrench.hardware.log.cycle_codec import cycle_descriptor
-from lapwrench.hardware.log.telemetry import checked_layout, layout_from_meta, message_name, telemetry_layout
+from lapwrench.hardware.log.telemetry import (
+    checked_layout,
+    layout_from_meta,
+    message_name,
+    simulation_layout,
+    telemetry_layout,
+)
 from lapwrench.spatial import Wrench
 from lapwrench.wrenches.base import Cue, TickContext
 
@@ -47,6 +54,64 @@ def chatty(monkeypatch: pytest.MonkeyPatch) -> dict[str, type[Cue]]:
     real = plugins.load
     monkeypatch.setattr(plugins, "load", lambda group, name: fake.get(name) or real(group, name))
     return fake
+
+
+@pytest.fixture
+def registered(chatty: dict[str, type[Cue]], monkeypatch: pytest.MonkeyPatch) -> dict[str, type[Cue]]:
+    """The ``chatty`` cues registered as entry points (beside the real ones), and ``broken``, whose
+    module does not exist (it fails to load)."""
+    real = importlib.metadata.entry_points
+    extra = [importlib.metadata.EntryPoint(n, f"lapwrench_no_such_plugin_{n}:Cue", plugins.CUE_GROUP)
+             for n in (*chatty, "broken")]
+
+    def entry_points(**params: Any) -> list[importlib.metadata.EntryPoint]:
+        return list(real(**params)) + (extra if params.get("group") == plugins.CUE_GROUP else [])
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    assert {"broken", "wide", "many_a"} <= set(plugins.names(plugins.CUE_GROUP))
+    return chatty
+
+
+ZOOM = ("zoom", ("spread", "in_band", "force"))
+KEEP_OUT_FIELDS = ("distance", "barrier")
+
+
+def test_live_simulated_runs_log_the_configured_cues_then_every_registered_type_under_its_name(
+    registered: dict[str, type[Cue]],
+) -> None:
+    """The configuration's cues first (in its order, under its names), then each registered type that
+    runs in Python and declares telemetry, by name: a name already there, a fused cue (interaction),
+    a cue whose fields break the bounds (wide, twice, upper) and one that fails to load are left out."""
+    zone = KEEP_OUT["keep_out"]
+    cfg = from_dict({"cues": {"zoom": {}, "near": {"type": "keep_out", **zone}}})
+    assert telemetry_layout(cfg.cues) == (ZOOM, ("near", KEEP_OUT_FIELDS))
+    layout = simulation_layout(cfg.cues)
+    assert layout[:3] == (ZOOM, ("near", KEEP_OUT_FIELDS), ("keep_out", KEEP_OUT_FIELDS))
+    names = [n for n, _ in layout]
+    assert len(set(names)) == len(names) and sum(len(f) for _, f in layout) <= MAX_TELEMETRY
+    assert not {"interaction", "broken", "wide", "twice", "upper"} & set(names)
+    other = from_dict({"cues": {"far": {"type": "keep_out", **zone}}})  # the demo's second (tracking) config
+    assert simulation_layout(cfg.cues, other.cues)[:3] == (ZOOM, ("near", KEEP_OUT_FIELDS), ("far", KEEP_OUT_FIELDS))
+
+
+def test_without_a_configured_cue_the_shipped_cue_types_are_logged_by_their_names() -> None:
+    """What the demo's zoom and keep-out scenarios add (``cues={"zoom": {}}``) is in the layout; a
+    disabled configured cue is not, but its type is."""
+    layout = simulation_layout()
+    assert ZOOM in layout and ("keep_out", KEEP_OUT_FIELDS) in layout
+    assert not {"rcm", "interaction", "tracking", "viscous"} & {n for n, _ in layout}  # in the compiled tick
+    off = from_dict({"cues": {"zoom": {"enabled": False}}})
+    assert telemetry_layout(off.cues) == () and simulation_layout(off.cues) == layout
+
+
+def test_the_registered_types_stop_before_the_bound_on_the_fields_logged(registered: dict[str, type[Cue]]) -> None:
+    """16 fields configured; keep_out's two fit, then many_c's eight would pass 24: nothing more."""
+    cfg = from_dict({"cues": {"many_a": {}, "many_b": {}}})
+    layout = simulation_layout(cfg.cues)
+    assert [n for n, _ in layout] == ["many_a", "many_b", "keep_out"]
+    assert sum(len(f) for _, f in layout) == 2 * MAX_CUE_TELEMETRY + 2 <= MAX_TELEMETRY
+    full = from_dict({"cues": {f"many_{n}": {} for n in "abc"}})  # 24: the bound itself
+    assert [n for n, _ in simulation_layout(full.cues)] == ["many_a", "many_b", "many_c"]
 
 
 def test_the_layout_names_the_python_cues_that_declare_telemetry() -> None:

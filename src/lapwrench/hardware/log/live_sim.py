@@ -14,6 +14,7 @@ from typing import Any
 from lapwrench.cli_types import listen_problem
 from lapwrench.hardware.log.live import IMAGE_PERIOD_S, LiveAddress, LiveError, annotated_view
 from lapwrench.hardware.log.record import cycle_record
+from lapwrench.hardware.log.telemetry import TelemetryLayout, simulation_layout
 from lapwrench.hardware.log.writer import RunLogger
 
 
@@ -65,16 +66,24 @@ class live_simulation(contextlib.AbstractContextManager["live_simulation"]):  # 
     """Every simulated cycle (decimated, :class:`SimTelemetry`) served live to Foxglove on ``address``
     while the ``with`` block runs: ``demo --foxglove`` and ``ui --foxglove``. The server starts here
     (LiveError, one line, if it cannot: the port taken, the host unknown) and says where it listens on
-    stderr, prefixed with ``who``."""
+    stderr, prefixed with ``who``.
 
-    def __init__(self, address: LiveAddress, robot: str, who: str) -> None:
+    ``telemetry`` is the cues whose telemetry the cycle messages carry (:mod:`.telemetry`): the
+    caller's :func:`~.telemetry.simulation_layout` of the configuration it runs; by default that of no
+    configuration (every registered cue type that logs telemetry, under its type name). A cue a cycle
+    has values for but the layout does not name is left out of the message.
+    """
+
+    def __init__(self, address: LiveAddress, robot: str, who: str, telemetry: TelemetryLayout | None = None) -> None:
         from lapwrench.robot.model import RobotModel
         from lapwrench.sim.loop import observe_cycles
 
         problem = listen_problem(*address)
         if problem:
             raise LiveError(problem)
-        self.logger = RunLogger(None, {"command": who, "robot": robot}, model=RobotModel(robot), live=address)
+        layout = simulation_layout() if telemetry is None else telemetry
+        meta = {"command": who, "robot": robot}
+        self.logger = RunLogger(None, meta, model=RobotModel(robot), live=address, telemetry=dict(layout))
         assert self.logger.live is not None
         host, port = self.logger.live.address
         print(f"{who}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)

@@ -15,7 +15,7 @@ fields a cue, :data:`~lapwrench.config_cues.MAX_TELEMETRY` in all), and again by
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from lapwrench import plugins
@@ -63,6 +63,40 @@ def telemetry_layout(cues: Iterable[CueEntry]) -> TelemetryLayout:
         fields = tuple(getattr(cls, "telemetry_fields", ()))
         if fields and not getattr(cls, "fused", False):
             out.append((entry.name, fields))
+    return checked_layout(out)
+
+
+def simulation_layout(*configs: Iterable[CueEntry]) -> TelemetryLayout:
+    """The layout of live simulated runs (``demo --foxglove``, ``ui --foxglove``), whose scenarios
+    and page may add cues the configuration does not name: the layout of the first configuration's
+    cues (``cfg.cues``, bounded where it was read), the cues of the others, then every registered cue
+    type (:func:`lapwrench.plugins.names`, in name order) that runs in Python and declares telemetry
+    fields, under its type name (how the scenarios add one: ``cues={"zoom": {}}``). A name already
+    present is skipped, and so is a type that fails to load or whose names break the bounds; the
+    additions stop before :data:`~lapwrench.config_cues.MAX_TELEMETRY` fields would be passed."""
+    first, *others = configs or ((),)
+    out = list(telemetry_layout(first))
+    total = sum(len(f) for _, f in out)
+
+    def candidates() -> Iterator[tuple[str, tuple[str, ...]]]:
+        for cues in others:
+            yield from telemetry_layout(cues)
+        for name in plugins.names(plugins.CUE_GROUP):
+            try:
+                cls = plugins.load(plugins.CUE_GROUP, name)
+            except plugins.PluginError:
+                continue
+            fields = getattr(cls, "telemetry_fields", ())
+            if plugins.NAME.match(name) and not getattr(cls, "fused", False) and not telemetry_fields_problem(fields):
+                yield name, tuple(fields)
+
+    for name, fields in candidates():
+        if not fields or any(name == n for n, _ in out):
+            continue
+        if total + len(fields) > MAX_TELEMETRY:
+            break
+        out.append((name, fields))
+        total += len(fields)
     return checked_layout(out)
 
 
