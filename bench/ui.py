@@ -168,7 +168,9 @@ def images_sent(app: Any) -> int:
     return int(n) if n is not None else app.image.count
 
 
-def start_browser(url: str) -> Any:
+def start_browser(url: str, preload: str | None = None) -> Any:
+    """Headless Chromium on ``url``, once the page is built; ``preload`` is a script the page runs before
+    its own (Chrome DevTools' ``Page.addScriptToEvaluateOnNewDocument``)."""
     from selenium import webdriver
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
@@ -180,6 +182,8 @@ def start_browser(url: str) -> Any:
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
     driver.set_page_load_timeout(60)
     driver.set_script_timeout(120)
+    if preload is not None:
+        driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": preload})
     driver.get(url)
     end = time.monotonic() + 90
     while time.monotonic() < end:  # the page is built when its buttons are

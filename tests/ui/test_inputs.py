@@ -120,9 +120,10 @@ def test_the_hand_wrench_cache_follows_the_hand_and_the_shaft() -> None:
     turned /= np.linalg.norm(turned)
     f1, _, changed = cache.wrench(hand, turned)
     assert changed and abs(f1 @ turned) < 1e-9
+    assert not cache.hand_changed, "a turned shaft is not a changed hand"
     hand.set_twist(0.4)
     _, torque, changed = cache.wrench(hand, turned)
-    assert changed
+    assert changed and cache.hand_changed
     np.testing.assert_allclose(torque, 0.4 * turned)
     hand.gizmo = np.array([5.0, 0.0, 0.0])  # even a field written directly counts
     assert cache.wrench(hand, turned)[2]

@@ -94,6 +94,26 @@ def test_every_tick_calls_the_per_cycle_callbacks(session: Session) -> None:
     assert len(seen) == 50 and seen == sorted(seen)
 
 
+def test_a_changed_hand_is_in_the_next_ticks_snapshot_and_announced_once(session: Session) -> None:
+    """The page draws a push as soon as a snapshot shows it (ui/app.py), not at its next period."""
+    calls: list[float] = []
+    session.on_hand_snapshot.append(lambda: calls.append(session.time))
+    run(session, 0.1)
+    calls.clear()  # the first tick's hand counts as changed
+    session.hand.set_grip_level("high")
+    session.hand.set_push(0.0, 9.0)
+    session.step()
+    snap = session.snapshot
+    assert snap is not None and snap.t == pytest.approx(session.time)
+    assert np.linalg.norm(snap.hand_force) == pytest.approx(9.0)
+    assert calls == [session.time]
+    run(session, 0.05)  # the same hand: snapshots at their own rate, no more announcements
+    assert len(calls) == 1
+    session.hand.set_push(0.0, 9.0)  # set again to the same values: not a change
+    run(session, 0.01)
+    assert len(calls) == 1
+
+
 def test_bad_instrument_values_are_refused_and_a_shown_instrument_is_tracked(session: Session) -> None:
     with pytest.raises(UiInputError):
         session.set_instrument(0, True, float("nan"), 0.0)

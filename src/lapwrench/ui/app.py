@@ -4,7 +4,8 @@ Three threads besides viser's own: the sim thread (:class:`~lapwrench.ui.runner.
 the 1 kHz ticks at wall-clock pace), the view thread (:class:`~lapwrench.ui.view.LaparoscopeView`,
 the laparoscope frames, each sent to the page as it comes, at the view's own frame rate) and the
 page thread (:meth:`UiApp.run_forever` or :meth:`UiApp.start`), which draws the latest snapshot
-into the scene at :data:`PAGE_HZ`, refreshes the plots at :data:`PLOT_HZ` and the status line.
+into the scene at :data:`PAGE_HZ` (and at once when a snapshot first shows a changed hand, so a push
+is not kept waiting for the next update), refreshes the plots at :data:`PLOT_HZ` and the status line.
 Neither steps the simulation, so a slow browser slows the page, not the control loop.
 """
 
@@ -27,6 +28,7 @@ from lapwrench.ui.session import Session
 from lapwrench.ui.view import RENDER_NICE, LaparoscopeView, view_size
 
 PAGE_HZ = 20.0  # scene updates per second
+EARLIEST_DRAW = 0.025  # s after the last update: a changed hand is drawn at once, but no sooner than this
 PLOT_HZ = 4.0  # status line and plot refreshes per second
 
 
@@ -81,6 +83,8 @@ class UiApp:
         self.page_frames = 0
         self.images_sent = 0  # view images sent to the page
         self._stop = threading.Event()
+        self._wake = threading.Event()  # set by the sim thread when a snapshot first shows a changed hand
+        self.session.on_hand_snapshot.append(self._wake.set)
         self._thread: threading.Thread | None = None
 
     @property
@@ -102,6 +106,7 @@ class UiApp:
     def request_stop(self) -> None:
         """Ask :meth:`run_forever` to stop (from a signal handler or another thread)."""
         self._stop.set()
+        self._wake.set()
 
     def run_forever(self) -> None:
         """Start, then wait until interrupted (Ctrl-C) or :meth:`request_stop`, then stop."""
@@ -116,6 +121,7 @@ class UiApp:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         self.runner.stop()
         self.view.stop()
         if self._thread is not None:
@@ -125,16 +131,21 @@ class UiApp:
 
     # -- the page thread ----------------------------------------------------------------------
     def _page_loop(self) -> None:
+        """Draw every 1 / :data:`PAGE_HZ` s, and at once (but not within :data:`EARLIEST_DRAW` of the last
+        update) when the sim thread has a snapshot that shows a changed hand: a push on the page reaches
+        the scene without waiting up to a whole period."""
         period, plot_every = 1.0 / PAGE_HZ, max(1, round(PAGE_HZ / PLOT_HZ))
         k = 0
         while not self._stop.is_set():
             t0 = time.perf_counter()
+            self._wake.clear()
             try:
                 self.draw(slow=k % plot_every == 0)
             except Exception as exc:  # a drawing bug must not take the server down: show it
                 self.controls.show_error(f"page update: {type(exc).__name__}: {exc}")
             k += 1
-            time.sleep(max(0.0, period - (time.perf_counter() - t0)))
+            time.sleep(max(0.0, EARLIEST_DRAW - (time.perf_counter() - t0)))
+            self._wake.wait(max(0.0, period - (time.perf_counter() - t0)))
 
     def draw(self, slow: bool = True) -> None:
         """One page update: the scene; with ``slow``, the status line and the plots

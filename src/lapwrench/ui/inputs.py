@@ -171,11 +171,13 @@ class HandWrenchCache:
         self._world: object = None
         self._d = np.zeros(3)
         self._wrench = (np.zeros(3), np.zeros(3))
+        self.hand_changed = False  # the last call saw a hand other than the call before (not just the shaft)
 
     def wrench(self, hand: HandInput, d: np.ndarray, world: object = None) -> tuple[np.ndarray, np.ndarray, bool]:
         """(force N, torque N m, whether it was recomputed) for shaft direction ``d`` in ``world``."""
         key = hand.key()
-        changed = key != self._key or world is not self._world or float(np.max(np.abs(d - self._d))) > self.turn
+        self.hand_changed = key != self._key
+        changed = self.hand_changed or world is not self._world or float(np.max(np.abs(d - self._d))) > self.turn
         if changed:
             self._key, self._world, self._d = key, world, np.array(d, float)
             self._wrench = hand.wrench(self._d)

@@ -153,6 +153,9 @@ class Session:
         self.instruments = [InstrumentTarget() for _ in range(self.closed.world.n_instruments)]
         self.history = history or History()
         self.on_tick: list[Callable[[Session, TickResult | None], None]] = []
+        # Called in the sim thread right after a snapshot that is the first to show a changed hand (the page
+        # draws it at once instead of at its next period: a push shows without waiting for the page).
+        self.on_hand_snapshot: list[Callable[[], None]] = []
         self.held: str | None = None
         self.alarms: list[str] = []
         self.max_rcm_error = 0.0  # m, physical, since the last reset_stats()
@@ -162,6 +165,7 @@ class Session:
         self._script: ScriptPlayer | None = None
         self._last: TickResult | None = None
         self._hand = HandWrenchCache()  # the page's hand as last set on the world
+        self._hand_changed = False  # since the last snapshot
 
     # -- what the page asks -------------------------------------------------------------------
     @property
@@ -277,6 +281,7 @@ class Session:
         hand stays on the world until changed: set again only when it changed (:class:`HandWrenchCache`)."""
         w = self.closed.world
         force, torque, changed = self._hand.wrench(self.hand, w.shaft_axis()[1], w)
+        self._hand_changed |= self._hand.hand_changed
         if self._script is None:
             if changed:
                 w.set_hand_wrench(force=force, torque=torque)
@@ -351,8 +356,12 @@ class Session:
         self.max_rcm_error = max(self.max_rcm_error, e)
         if self.ticks % SAMPLE_EVERY == 0:
             self.history.append(c.t, self._sample(res, e))
-        if self.ticks % SNAPSHOT_EVERY == 0:
+        if self.ticks % SNAPSHOT_EVERY == 0 or self._hand_changed:
             self.snapshot = self._snapshot(e)
+            if self._hand_changed:
+                self._hand_changed = False
+                for notify in self.on_hand_snapshot:
+                    notify()
         if self.ticks % 1000 == 0:
             for records in (c.compute_us, c.events):
                 del records[:-KEPT_RECORDS]
