@@ -52,6 +52,12 @@ def checked_layout(telemetry: Mapping[str, Sequence[str]] | Iterable[tuple[str, 
     return layout
 
 
+def _declared_fields(cls: object) -> Any:
+    """The telemetry field names a cue type declares, as declared; () for a type fused into the compiled
+    tick (it logs none there)."""
+    return () if getattr(cls, "fused", False) else getattr(cls, "telemetry_fields", ())
+
+
 def telemetry_layout(cues: Iterable[CueEntry]) -> TelemetryLayout:
     """The layout of a configuration's cues (``cfg.cues``): each enabled cue that runs in Python
     (not ``fused`` into the compiled tick) and declares telemetry fields, in configuration order."""
@@ -60,8 +66,8 @@ def telemetry_layout(cues: Iterable[CueEntry]) -> TelemetryLayout:
         if not entry.enabled:
             continue
         cls = plugins.load(plugins.CUE_GROUP, entry.type)
-        fields = tuple(getattr(cls, "telemetry_fields", ()))
-        if fields and not getattr(cls, "fused", False):
+        fields = tuple(_declared_fields(cls))
+        if fields:
             out.append((entry.name, fields))
     return checked_layout(out)
 
@@ -86,8 +92,8 @@ def simulation_layout(*configs: Iterable[CueEntry]) -> TelemetryLayout:
                 cls = plugins.load(plugins.CUE_GROUP, name)
             except plugins.PluginError:
                 continue
-            fields = getattr(cls, "telemetry_fields", ())
-            if plugins.NAME.match(name) and not getattr(cls, "fused", False) and not telemetry_fields_problem(fields):
+            fields = _declared_fields(cls)
+            if plugins.NAME.match(name) and not telemetry_fields_problem(fields):
                 yield name, tuple(fields)
 
     for name, fields in candidates():
