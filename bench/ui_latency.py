@@ -82,7 +82,7 @@ PRELOAD = """
   const raf = window.requestAnimationFrame.bind(window);
   window.requestAnimationFrame = (cb) => raf((ts) => {
     const start = clock();
-    const f = lw.frames, last = f.length ? f[f.length - 1] : null;
+    const f = lw.frames;
     if (lw.ts.length === 0 || lw.ts[lw.ts.length - 1] !== ts) {
       lw.ts.push(ts);
       if (lw.ts.length > 4000) lw.ts.splice(0, 2000);
@@ -125,7 +125,7 @@ class Probe:
     moved one pixel (``motion_sent``)."""
 
     def __init__(self, app: UiApp, body: int) -> None:
-        self.app, self.body = app, body
+        self.body = body
         self.p0 = np.zeros(3)  # where the handle was when the push came
         self.armed = False
         self.threshold = math.inf
