@@ -4,7 +4,10 @@ here with a plain UDP socket, as the device would be."""
 
 from __future__ import annotations
 
+import os
 import socket
+import sys
+import threading
 from collections.abc import Iterator
 
 import pytest
@@ -98,3 +101,52 @@ def test_a_paused_box_goes_silent_and_a_bad_request_is_ignored(client: socket.so
         box.resume()
         assert records(client, 1)
     assert box.bad_requests == 1 and box.sent >= 2  # counted once the box's thread has ended
+
+
+def _fifo_threads() -> set[int]:
+    """The ids of this process's threads that run at SCHED_FIFO."""
+    out = set()
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            if os.sched_getscheduler(int(tid)) == os.SCHED_FIFO:
+                out.add(int(tid))
+        except OSError:  # the thread ended meanwhile
+            pass
+    return out
+
+
+def _fifo_permitted() -> bool:
+    """Whether this process may raise a thread to SCHED_FIFO (root, or CAP_SYS_NICE)."""
+    result: list[bool] = []
+
+    def probe() -> None:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            result.append(True)
+        except OSError:
+            result.append(False)
+
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    return result[0]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread scheduling policy is Linux's")
+def test_fifo_priority_raises_the_device_thread_only(client: socket.socket) -> None:
+    """A real box has a CPU of its own: with ``fifo_priority`` the device thread, and only it, runs at
+    SCHED_FIFO; without it no thread does; where it is not permitted the box still streams."""
+    before = _fifo_threads()
+    with SimulatedHexBox(rate_hz=1000.0, counts=(1, 2, 3, 4, 5, 6)) as box:
+        client.sendto(pack_request(CMD_START_REALTIME), box.address)
+        assert len(records(client, 3)) == 3
+        assert _fifo_threads() == before
+    with SimulatedHexBox(rate_hz=1000.0, counts=(1, 2, 3, 4, 5, 6), fifo_priority=10) as box:
+        client.sendto(pack_request(CMD_START_REALTIME), box.address)
+        assert records(client, 3)[-1].counts[:3] == (1, 2, 3)
+        raised = _fifo_threads() - before
+        if _fifo_permitted():
+            assert len(raised) == 1 and threading.get_native_id() not in raised
+            assert os.sched_getparam(raised.pop()).sched_priority == 10
+        else:
+            assert not raised

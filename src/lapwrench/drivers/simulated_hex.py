@@ -11,6 +11,7 @@ Everything binds to 127.0.0.1 by default; the port is ephemeral unless given.
 from __future__ import annotations
 
 import contextlib
+import os
 import select
 import socket
 import threading
@@ -48,6 +49,9 @@ class SimulatedHexBox:
         port: Port to bind (0 = ephemeral; read :attr:`port` afterwards).
         device_bias: Emulate the device-side bias command (0x0042) by subtracting the current
             counts from later records.
+        fifo_priority: SCHED_FIFO priority of the device thread, when permitted (silently not
+            otherwise). A real box has a CPU of its own: with it, a busy machine does not delay its
+            records, so a test or benchmark beside CPU-heavy work measures the host, not the box.
 
     Attributes:
         commands: Every well-formed request received, as ``(command, data)``.
@@ -63,8 +67,10 @@ class SimulatedHexBox:
         host: str = "127.0.0.1",
         port: int = 0,
         device_bias: bool = True,
+        fifo_priority: int | None = None,
     ) -> None:
         self.period = 1.0 / rate_hz
+        self.fifo_priority = fifo_priority
         self.counts = np.asarray(counts, dtype=np.int64).reshape(6)
         self.counts_fn = counts_fn
         self.status = 0
@@ -188,6 +194,9 @@ class SimulatedHexBox:
             self.sent += 1
 
     def _run(self) -> None:
+        if self.fifo_priority:  # Linux: pid 0 is the calling thread, this device thread only
+            with contextlib.suppress(OSError, AttributeError):
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.fifo_priority))
         next_t = time.monotonic()
         while not self._stop.is_set():
             timeout = max(0.0, next_t - time.monotonic()) if self._streaming else 0.02

@@ -277,10 +277,10 @@ def _simulated_hex_main(
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent stops it: Ctrl-C and a closed terminal
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # reach the whole process group
-    if fifo_priority:  # it stands for a device with a CPU of its own: keep it off our CPU contention
-        with contextlib.suppress(OSError, AttributeError):
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(fifo_priority))
-    dev = SimulatedHexBox(rate_hz=rate_hz, counts_fn=functools.partial(_force_counts, force_fn, t0)).start()
+    # it stands for a device with a CPU of its own: fifo_priority keeps it off our CPU contention
+    dev = SimulatedHexBox(
+        rate_hz=rate_hz, counts_fn=functools.partial(_force_counts, force_fn, t0), fifo_priority=fifo_priority
+    ).start()
     try:
         conn.send(dev.port)
         parent = mp.parent_process()
