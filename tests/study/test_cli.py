@@ -35,6 +35,11 @@ STUDY = {"name": "cli", "scenarios": ["grip"], "seeds": 1, "time_scale": 0.05, "
         (["sweep", "{good}", "--address", "x:1", "--workers", "2"], "--workers sizes the embedded Ray"),
         (["sweep", "{good}", "--address", "no-port"], "not HOST:PORT"),
         (["sweep", "{good}", "--out", "{file}"], "--out"),
+        (["sweep", "{good}", "--save-every", "0"], "--save-every"),
+        (["sweep", "{good}", "--save-every", "-1"], "--save-every"),
+        (["sweep", "{good}", "--save-every", "nan"], "--save-every"),
+        (["sweep", "{good}", "--save-every", "inf"], "--save-every"),
+        (["sweep", "{good}", "--save-every", "soon"], "--save-every"),
         (["tune", "{good}"], "'search' must map parameter keys"),
         (["tune", "/no/such/tune.yaml"], "tuning file not found"),
     ],
@@ -60,22 +65,34 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
     assert len(errors) == 1, err  # one line (argparse puts its usage lines before its own)
 
 
+def test_sweep_help_names_the_save_interval_and_its_default(capsys: pytest.CaptureFixture[str]) -> None:
+    from lapwrench.study.runner import SAVE_EVERY_S
+
+    with pytest.raises(SystemExit):
+        main(["sweep", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--save-every SECONDS" in help_text and f"(default {SAVE_EVERY_S:g})" in help_text
+
+
 @pytest.mark.slow
 def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
     """SIGTERM in the middle: exit 130, a readable table with the finished jobs; the same command again
     runs only the rest and writes the report."""
-    # jobs long enough that the first rows are saved (every 5 s) well before the last job ends: a study that
-    # finishes before its first save would be "killed" during Ray's shutdown instead of halfway
-    study = _write(tmp_path / "study.yaml", {**STUDY, "seeds": 6, "time_scale": 0.25})
+    # one worker and two jobs in this order: grip (three short runs) and rcm-disturbance (two runs of 6 s
+    # simulated, several seconds). The table is saved as soon as a job finishes (--save-every 0.1), so it
+    # appears after grip, while rcm-disturbance runs: the kill lands halfway, not during Ray's shutdown
+    rows_per_job = {"grip": 3, "rcm-disturbance": 2}
+    study = _write(tmp_path / "study.yaml", {**STUDY, "scenarios": list(rows_per_job)})
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(out), "--workers", "1", "--quiet"]
+    cmd = [sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(out), "--workers", "1", "--quiet",
+           "--save-every", "0.1"]
     env = {**os.environ, "MUJOCO_GL": "egl"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     table = out / "runs.parquet"
     deadline = time.monotonic() + 240
     while not table.exists() and time.monotonic() < deadline and proc.poll() is None:
-        time.sleep(0.5)
+        time.sleep(0.1)
     assert table.exists(), proc.communicate()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
@@ -83,14 +100,17 @@ def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
     assert "interrupted" in err and "Traceback" not in err
     first = pd.read_parquet(table)
     done = first.run_id.nunique()
-    assert 1 <= done < 6
+    assert done == 1
+    assert len(first) == rows_per_job[first.scenario.iloc[0]]  # the whole job
     assert not (out / "runs.parquet.tmp").exists()
 
     again = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert again.returncode == 0, again.stderr
-    assert f"ran {6 - done} jobs (0 failed) and skipped {done}" in again.stdout
+    assert "ran 1 jobs (0 failed) and skipped 1" in again.stdout
     rows = pd.read_parquet(table)
-    assert rows.run_id.nunique() == 6 and len(rows) == 18
+    assert rows.run_id.nunique() == 2 and len(rows) == sum(rows_per_job.values())
+    cells = [c for c in first.columns if first[c].notna().any()]  # an all-missing column may change its dtype
+    pd.testing.assert_frame_equal(rows.iloc[: len(first)][cells].reset_index(drop=True), first[cells])  # kept as is
     assert (out / "report.md").exists() and (out / "study.yaml").exists()
 
 

@@ -1,8 +1,9 @@
 """lapwrench.study.runner on real Ray: a small study on local Ray with 2 CPUs (rows, resume, a failure
-kept as a row), a lost worker, and a two-node cluster started with ``ray start`` on this machine."""
+kept as a row), and a two-node cluster started with ``ray start`` on this machine."""
 
 from __future__ import annotations
 
+import math
 import os
 import secrets
 import shutil
@@ -11,13 +12,14 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
 import pytest
 import yaml
 
-from lapwrench.study.runner import ClusterError, check_reachable, run_study
+from lapwrench.study.runner import ClusterError, check_reachable, run_study, start_ray
 from lapwrench.study.spec import from_dict
 
 pytestmark = pytest.mark.slow
@@ -41,31 +43,6 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def test_small_study_rows_resume_and_failures(tmp_path: Path) -> None:
-    spec = from_dict(STUDY)
-    outcome, _ = run_study(spec, tmp_path, workers=2, progress=False)
-    rows = pd.read_parquet(tmp_path / "runs.parquet")
-    assert outcome.ran == 4 and outcome.skipped == 0 and outcome.failed == 2
-    ok = rows[rows.status == "ok"]
-    failed = rows[rows.status == "failed"]
-    assert len(ok) == 2 * 3  # two good jobs, three grip levels each
-    assert sorted(ok.label.unique()) == ["high", "low", "medium"]
-    assert len(failed) == 2 and failed.label.isna().all()
-    assert failed.error.str.contains("safety supervisor stopped").all()
-    assert (failed["p.safety.max_residual_force"] == 0.01).all()
-    assert failed.config.str.contains("max_residual_force: 0.01").all()  # kept with its configuration
-    assert ok["m.rcm_error_max_mm"].notna().all()
-    assert rows.run_id.nunique() == 4 and rows.node.nunique() == 1
-
-    again, _ = run_study(spec, tmp_path, workers=2, progress=False)
-    assert again.ran == 0 and again.skipped == 4
-    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "runs.parquet"), rows)
-
-    retried, _ = run_study(spec, tmp_path, workers=2, progress=False, retry_failed=True)
-    assert retried.ran == 2 and retried.skipped == 2 and retried.failed == 2
-    assert len(pd.read_parquet(tmp_path / "runs.parquet")) == len(rows)
-
-
 def test_unreachable_cluster_is_a_clear_error() -> None:
     with pytest.raises(ClusterError, match=r"cannot reach the Ray cluster at 127\.0\.0\.1:1"):
         check_reachable("127.0.0.1:1")
@@ -80,28 +57,55 @@ def _ray_cli() -> str:
     return ray
 
 
-def _start_node(args: list[str], temp: Path) -> subprocess.Popen:
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}  # with the test's RAY_AUTH_* (see below)
-    return subprocess.Popen([_ray_cli(), "start", "--block", "--num-cpus=1", "--node-ip-address=127.0.0.1",
-                             "--disable-usage-stats", *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            env=env, start_new_session=True, cwd=temp)
+def _start_node(args: list[str], temp: Path, log: str) -> subprocess.Popen:
+    # with the test's RAY_AUTH_* (see below); no drain on SIGTERM (Ray 2.60 waits up to 30 s for the node to
+    # drain, here for a GCS that the same SIGTERM to the process group has already stopped)
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
+    with open(temp / log, "wb") as err:  # a file, not a pipe nobody reads
+        return subprocess.Popen([_ray_cli(), "start", "--block", "--num-cpus=1", "--node-ip-address=127.0.0.1",
+                                 "--disable-usage-stats", *args], stdout=subprocess.DEVNULL, stderr=err,
+                                env=env, start_new_session=True, cwd=temp)
+
+
+def _wait_for_head(address: str, head: subprocess.Popen, timeout_s: float = 90.0) -> None:
+    """Until the head's GCS port accepts connections (a second node can join from then on)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            check_reachable(address, timeout_s=1.0)
+            return
+        except ClusterError:
+            assert head.poll() is None, f"ray start --head ended with code {head.returncode}"
+            assert time.monotonic() < deadline, f"the Ray head did not come up at {address}"
+            time.sleep(0.2)
 
 
 def _wait_for_nodes(address: str, n: int, timeout_s: float = 90.0) -> None:
-    code = ("import ray, sys; ray.init(address=sys.argv[1], logging_level='ERROR'); "
-            "print(sum(1 for x in ray.nodes() if x['Alive']))")
+    """Until ``n`` nodes are alive: one driver process that joins the cluster once and asks it again and again."""
+    code = ("import ray, sys, time\n"
+            "ray.init(address=sys.argv[1], logging_level='ERROR')\n"
+            "alive = lambda: sum(1 for x in ray.nodes() if x['Alive'])\n"
+            "end = time.monotonic() + float(sys.argv[3])\n"
+            "while alive() < int(sys.argv[2]) and time.monotonic() < end:\n"
+            "    time.sleep(0.2)\n"
+            "print(alive())")
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        out = subprocess.run([sys.executable, "-c", code, address], capture_output=True, text=True, timeout=60)
+        left = max(1.0, deadline - time.monotonic())
+        out = subprocess.run([sys.executable, "-c", code, address, str(n), str(left)], capture_output=True, text=True,
+                             timeout=left + 60)
         if out.stdout.strip().isdigit() and int(out.stdout.strip()) >= n:
             return
         time.sleep(1.0)
     raise AssertionError(f"{n} Ray nodes did not come up at {address}")
 
 
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """SIGTERM to every node at once, then wait for each (SIGKILL after 30 s)."""
+    running = [p for p in procs if p.poll() is None]
+    for proc in running:
         os.killpg(proc.pid, signal.SIGTERM)
+    for proc in running:
         try:
             proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
@@ -117,11 +121,11 @@ def test_two_node_cluster_through_address(tmp_path: Path, monkeypatch: pytest.Mo
     monkeypatch.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
     port = _free_port()
     address = f"127.0.0.1:{port}"
-    head = _start_node(["--head", f"--port={port}", "--include-dashboard=false"], tmp_path)
+    head = _start_node(["--head", f"--port={port}", "--include-dashboard=false"], tmp_path, "head.log")
     nodes = [head]
     try:
-        _wait_for_nodes(address, 1)
-        nodes.append(_start_node([f"--address={address}"], tmp_path))
+        _wait_for_head(address, head)
+        nodes.append(_start_node([f"--address={address}"], tmp_path, "node.log"))
         _wait_for_nodes(address, 2)
         # The driver is `lapwrench sweep --address` in a process of its own: Ray keeps the auth token of
         # the first ray.init of a process, and this test process may have run Ray before.
@@ -137,5 +141,54 @@ def test_two_node_cluster_through_address(tmp_path: Path, monkeypatch: pytest.Mo
         assert rows.run_id.nunique() == 4 and (rows.status == "ok").all()
         assert rows.node.nunique() == 2, rows.node.value_counts()
     finally:
-        for proc in reversed(nodes):
-            _stop(proc)
+        _stop(nodes)
+
+
+@pytest.fixture(scope="module")
+def local_ray() -> Iterator[None]:
+    """One embedded Ray with 2 CPUs, started as ``lapwrench sweep`` starts it, for this module's studies:
+    run_study uses a Ray this process runs already and leaves it running."""
+    import ray
+
+    start_ray(None, 2)
+    yield
+    ray.shutdown()
+
+
+def test_small_study_rows_resume_and_failures(tmp_path: Path, local_ray: None) -> None:
+    import ray
+
+    spec = from_dict(STUDY)
+    outcome, _ = run_study(spec, tmp_path, progress=False)
+    assert ray.is_initialized()  # the caller's Ray is left running
+    rows = pd.read_parquet(tmp_path / "runs.parquet")
+    assert outcome.ran == 4 and outcome.skipped == 0 and outcome.failed == 2
+    ok = rows[rows.status == "ok"]
+    failed = rows[rows.status == "failed"]
+    assert len(ok) == 2 * 3  # two good jobs, three grip levels each
+    assert sorted(ok.label.unique()) == ["high", "low", "medium"]
+    assert len(failed) == 2 and failed.label.isna().all()
+    assert failed.error.str.contains("safety supervisor stopped").all()
+    assert (failed["p.safety.max_residual_force"] == 0.01).all()
+    assert failed.config.str.contains("max_residual_force: 0.01").all()  # kept with its configuration
+    assert ok["m.rcm_error_max_mm"].notna().all()
+    assert rows.run_id.nunique() == 4 and rows.node.nunique() == 1
+
+    again, _ = run_study(spec, tmp_path, progress=False)
+    assert again.ran == 0 and again.skipped == 4
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "runs.parquet"), rows)
+
+    retried, _ = run_study(spec, tmp_path, progress=False, retry_failed=True)
+    assert retried.ran == 2 and retried.skipped == 2 and retried.failed == 2
+    assert len(pd.read_parquet(tmp_path / "runs.parquet")) == len(rows)
+
+
+def test_a_running_ray_refuses_address_and_workers_and_a_bad_save_interval(tmp_path: Path, local_ray: None) -> None:
+    spec = from_dict(STUDY)
+    for kwargs in ({"workers": 2}, {"address": "auto"}):
+        with pytest.raises(ValueError, match="Ray already runs in this process"):
+            run_study(spec, tmp_path, progress=False, **kwargs)
+    for bad in (0.0, -1.0, math.nan, math.inf, True):
+        with pytest.raises(ValueError, match="save_every_s must be a finite number > 0"):
+            run_study(spec, tmp_path, progress=False, save_every_s=bad)
+    assert not (tmp_path / "runs.parquet").exists()  # refused before anything ran

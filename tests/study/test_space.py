@@ -272,8 +272,10 @@ def test_check_key_of_corners_bounds_every_clipped_normal_draw() -> None:
     d = parse_dist("world.surgeon_force", {"normal": [1.0, 5.0], "min": 0.1, "max": 3.0})
     check_key(BASE, "world.surgeon_force", d.corners())
     rng = np.random.default_rng(1)
-    for _ in range(200):
-        apply(BASE, {"world.surgeon_force": d.draw(rng)})
+    draws = {d.draw(rng) for _ in range(200)}  # apply is deterministic: each distinct value once
+    assert min(draws) == 0.1 and max(draws) == 3.0  # clipped at both ends (each end takes ~40 % of a N(1, 5))
+    for value in draws:
+        apply(BASE, {"world.surgeon_force": value})
 
 
 def test_integer_dist_on_an_integer_config_key_passes_check_key() -> None:
@@ -284,7 +286,8 @@ def test_integer_dist_on_an_integer_config_key_passes_check_key() -> None:
 def test_integer_draws_apply_to_an_integer_config_key() -> None:
     d = parse_dist("inputs.max_instruments", {"integer": [1, 8]})
     rng = np.random.default_rng(0)
-    values = {apply(BASE, {"inputs.max_instruments": d.draw(rng)})[0].inputs.max_instruments for _ in range(100)}
+    draws = {d.draw(rng) for _ in range(100)}  # apply is deterministic: each distinct value once
+    values = {apply(BASE, {"inputs.max_instruments": v})[0].inputs.max_instruments for v in draws}
     assert values == set(range(1, 9))
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import pytest
+import yaml
 
 from lapwrench import config as config_mod
 from lapwrench.study.tune import PENALTY, Evaluation, config_jobs, evaluate, score_rows
@@ -61,9 +62,12 @@ def test_config_jobs_cover_every_scenario_and_seed_with_the_given_config() -> No
 
 @pytest.mark.slow
 def test_evaluate_runs_the_scenarios_and_a_tight_bound_fails() -> None:
-    ev, rows = evaluate(SPEC, {"viscous.k_t": 150.0})
-    assert {r["scenario"] for r in rows} == {"grip", "rcm-disturbance"}
+    one_seed = from_dict({**_raw(), "seeds": [0], "constraints": [{"metric": "rcm_error_max_mm", "max": 1.0}]})
+    ev, rows = evaluate(one_seed, {"viscous.k_t": 150.0})
+    assert {(r["scenario"], r["seed"]) for r in rows} == {("grip", 0), ("rcm-disturbance", 0)}
+    assert len(rows) == 3 + 2  # grip's three levels, rcm-disturbance with and without adaptation
     assert all(r["status"] == "ok" for r in rows)
+    assert all(yaml.safe_load(r["config"])["viscous"]["k_t"] == 150.0 for r in rows)  # the trial's params ran
     assert math.isfinite(ev.objective) and ev.objective >= 6.0  # rcm-disturbance runs at least 6 s
     tight = from_dict({**_raw(), "constraints": [{"metric": "rcm_error_max_mm", "max": 1e-9}]})
     assert not score_rows(rows, tight).feasible

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lapwrench.cli_types import int_in, output_dir
+from lapwrench.cli_types import int_in, output_dir, positive_float
 
 ADDRESS_HELP = "an existing Ray cluster (HOST:PORT, or 'auto'); default: start Ray here, embedded"
 
@@ -30,6 +30,8 @@ def add_parsers(sub: Any) -> None:
     sw.add_argument("study", metavar="STUDY.yaml", help="the study file (see studies/paper.yaml)")
     sw.add_argument("--out", type=output_dir, default=None, help="results folder (default reports/sweeps/<name>)")
     sw.add_argument("--retry-failed", action="store_true", help="run the failed runs of an earlier sweep again")
+    sw.add_argument("--save-every", type=positive_float, default=None, metavar="SECONDS",
+                    help="save the results table at most this often while runs finish, > 0 (default 5)")
     tu = sub.add_parser("tune", help="search gains with Ray Tune for an objective under constraints (TUNE.yaml)")
     tu.add_argument("study", metavar="TUNE.yaml", help="the tuning file (see studies/tune.yaml)")
     tu.add_argument("--out", type=output_dir, default=None, help="results folder (default reports/tune/<name>)")
@@ -101,11 +103,12 @@ def sweep_main(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     try:
         spec, out = _start(args, "sweep")
-        from lapwrench.study.runner import ClusterError, run_study
+        from lapwrench.study.runner import SAVE_EVERY_S, ClusterError, run_study
         from lapwrench.study.table import TableError
 
         try:
-            outcome, table = run_study(spec, out, address=args.address, workers=args.workers, progress=not args.quiet)
+            outcome, table = run_study(spec, out, address=args.address, workers=args.workers, progress=not args.quiet,
+                                       save_every_s=SAVE_EVERY_S if args.save_every is None else args.save_every)
         except (TableError, ClusterError) as exc:
             raise StudyUsageError(str(exc)) from exc
     except StudyUsageError as exc:

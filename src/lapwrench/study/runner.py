@@ -3,16 +3,19 @@
 Each job is one Ray task of one CPU (:func:`lapwrench.study.execute.run_job`), so a machine runs as many
 jobs at once as it has cores, and a cluster as many as all its nodes. The driver keeps a few tasks
 per CPU in flight, saves the table as results come back (:class:`~lapwrench.study.table.ResultTable`),
-and shows a progress bar. A task lost with its worker (killed, out of memory) is a failed row like
+at most every ``save_every_s`` seconds, and shows a progress bar. A Ray this process already started is
+used as it is and left running. A task lost with its worker (killed, out of memory) is a failed row like
 any other failure; the study goes on.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -24,7 +27,7 @@ from lapwrench.study.execute import job_rows, one_line, run_job
 from lapwrench.study.spec import Job, StudySpec
 from lapwrench.study.table import ResultTable
 
-SAVE_EVERY_S = 5.0  # the table is rewritten at most this often while results arrive (and at the end)
+SAVE_EVERY_S = 5.0  # default: the table is rewritten at most this often while results arrive (and at the end)
 IN_FLIGHT_PER_CPU = 2
 # Every worker process: one thread per maths library (a job is one CPU), headless rendering.
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -102,7 +105,20 @@ def start_ray(address: str | None, workers: int | None) -> int:
         raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
     for sig, handler in handlers.items():  # ray.init installs its own SIGTERM handler: the caller's wins
         signal.signal(sig, handler)
+    return _cluster_cpus()
+
+
+def _cluster_cpus() -> int:
+    """The CPUs of the Ray cluster this process runs or joined (at least 1)."""
+    import ray
+
     return max(1, int(ray.cluster_resources().get("CPU", 1)))
+
+
+def _ray_running() -> bool:
+    """Whether this process has started or joined Ray already (without importing Ray when it has not)."""
+    ray = sys.modules.get("ray")
+    return ray is not None and bool(ray.is_initialized())
 
 
 def _remote() -> Any:
@@ -128,10 +144,17 @@ def run_study(
     retry_failed: bool = False,
     progress: bool = True,
     on_rows: Callable[[list[dict]], None] | None = None,
+    save_every_s: float = SAVE_EVERY_S,
 ) -> tuple[SweepOutcome, ResultTable]:
     """Run every job of ``spec`` not yet in ``<out>/runs.parquet``; returns what happened and the table.
+    The table is saved at most every ``save_every_s`` seconds while results arrive, and at the end.
+    When this process has started Ray already (``ray.is_initialized()``), that Ray runs the jobs and
+    stays up; ``address`` and ``workers`` must then be None. Otherwise Ray is started here (see
+    :func:`start_ray`) and shut down at the end.
 
     Raises:
+        ValueError: ``save_every_s`` is not a finite number > 0, or ``address``/``workers`` are given
+            while Ray already runs in this process.
         TableError: the table exists but is damaged (before anything runs).
         ClusterError: Ray could not start or connect.
         KeyboardInterrupt: after the finished rows were saved and the running tasks cancelled.
@@ -140,6 +163,12 @@ def run_study(
 
     from lapwrench.study.spec import expand
 
+    if isinstance(save_every_s, bool) or not (isinstance(save_every_s, int | float) and math.isfinite(save_every_s)
+                                              and save_every_s > 0):
+        raise ValueError(f"save_every_s must be a finite number > 0, got {save_every_s!r}")
+    own_ray = not _ray_running()
+    if not own_ray and (address is not None or workers is not None):
+        raise ValueError("Ray already runs in this process: address and workers must be None")
     out.mkdir(parents=True, exist_ok=True)
     table = ResultTable(out)
     if retry_failed:
@@ -152,9 +181,9 @@ def run_study(
         table.save()
         return outcome, table
     t0 = time.perf_counter()
-    cpus = start_ray(address, workers)
     import ray
 
+    cpus = start_ray(address, workers) if own_ray else _cluster_cpus()
     task = _remote()
     pending: dict[Any, Job] = {}
     queue = list(reversed(todo))
@@ -182,7 +211,7 @@ def run_study(
                     on_rows(rows)
                 bar.update(1)
                 bar.set_postfix(failed=outcome.failed, refresh=False)
-            if time.monotonic() - last_save > SAVE_EVERY_S:
+            if time.monotonic() - last_save > save_every_s:
                 table.save()
                 last_save = time.monotonic()
     except KeyboardInterrupt:
@@ -194,5 +223,6 @@ def run_study(
         bar.close()
         table.save()
         outcome.wall_s = time.perf_counter() - t0
-        ray.shutdown()
+        if own_ray:
+            ray.shutdown()
     return outcome, table
