@@ -32,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import math
+import os
 import socket
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -208,6 +209,7 @@ class FrankaRobot:
         self._plf: Any = None
         self._last_q: Vec | None = None
         self._last_cmd: Vec | None = None
+        self._sched: tuple[int, int] | None = None  # the connecting thread's own policy and priority
 
     @property
     def device(self) -> str:
@@ -235,6 +237,7 @@ class FrankaRobot:
         """Connect, configure (collision, load, impedance) and start joint position control."""
         plf = self._plf = self._import()
         rt = plf.RealtimeConfig.kEnforce if self.realtime == "enforce" else plf.RealtimeConfig.kIgnore
+        self._sched = _thread_scheduling()
         try:
             self._robot = plf.Robot(self.robot_ip, rt)
         except Exception as exc:
@@ -252,6 +255,7 @@ class FrankaRobot:
             if self.joint_impedance is not None:
                 self._robot.set_joint_impedance(list(self.joint_impedance))
             self._control = self._robot.start_joint_position_control(plf.ControllerMode.JointImpedance)
+            _not_inherited()  # libfranka raised this thread to SCHED_FIFO 99 where permitted
             state, _ = self._control.readOnce()
         except Exception as exc:
             self._release()
@@ -315,6 +319,33 @@ class FrankaRobot:
             with contextlib.suppress(Exception):  # stop() on a dead connection
                 robot.stop()
             del robot
+        sched, self._sched = self._sched, None
+        if sched is not None:
+            _set_thread_scheduling(*sched)
+
+
+# -- the connecting thread's scheduling -------------------------------------------------------------
+# libfranka's start_joint_position_control raises the calling thread to SCHED_FIFO 99 where it may (as
+# root, also with RealtimeConfig.kIgnore). While connected that is the control loop's priority; but
+# every process started from the thread afterwards would inherit it (a browser or a detector at
+# FIFO 99 starves the machine, the loop included), and after the release the thread would keep it.
+def _thread_scheduling() -> tuple[int, int]:
+    """The calling thread's scheduling policy and priority (Linux: pid 0 is the calling thread)."""
+    if not hasattr(os, "sched_getscheduler"):
+        return (0, 0)
+    return os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0), os.sched_getparam(0).sched_priority
+
+
+def _not_inherited() -> None:
+    """Keep the calling thread's real-time policy, if it has one, from passing to the processes it starts."""
+    policy, priority = _thread_scheduling()
+    if policy in (getattr(os, "SCHED_FIFO", -1), getattr(os, "SCHED_RR", -1)):
+        _set_thread_scheduling(policy | getattr(os, "SCHED_RESET_ON_FORK", 0), priority)
+
+
+def _set_thread_scheduling(policy: int, priority: int) -> None:
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, policy, os.sched_param(priority))
 
     def error_recovery(self) -> None:
         """``automatic_error_recovery`` (after a reflex), outside of a control session."""
