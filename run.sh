@@ -50,8 +50,16 @@ case "$cmd" in
                 echo "[lapwrench] warning: chromium/chromedriver missing; the browser test will be skipped" >&2
             fi
         fi
-        "$VENV/bin/ruff" check src tests bench
-        exec "$VENV/bin/python" -m pytest -q "$@"
+        "$VENV/bin/ruff" check src tests bench examples
+        if [ $# -gt 0 ]; then
+            exec "$VENV/bin/python" -m pytest -q "$@"
+        fi
+        # the whole suite in two phases: the tests that may share the machine on pytest-xdist workers (one
+        # per core), then the "serial" ones (real time, franky-sim, the browser, Ray; tests/conftest.py) alone
+        rc=0
+        "$VENV/bin/python" -m pytest -q -n auto -m "not serial" || rc=$?
+        "$VENV/bin/python" -m pytest -q -m serial || rc=$((rc ? rc : $?))
+        exit "$rc"
         ;;
     setup)
         setup
