@@ -6,6 +6,7 @@ import os
 from collections.abc import Iterator
 
 import pytest
+from helpers import thread_policy
 
 from lapwrench.config import Config, load
 from lapwrench.robot.model import RobotModel
@@ -24,7 +25,6 @@ def any_model(request: pytest.FixtureRequest) -> RobotModel:
 @pytest.fixture(scope="session")
 def panda() -> RobotModel:
     return RobotModel("panda")
-
 
 
 # Tests that own the machine while they run: the real-time process and franky-sim (one server per machine,
@@ -46,15 +46,9 @@ def keeps_the_scheduling_policy() -> Iterator[None]:
     """A test must leave this process's main thread at the policy it found: a thread left at SCHED_FIFO
     (libfranka raises its caller to 99) passes it to every process started later, e.g. the browser of
     the UI tests, which then starves the machine. Put back, and the test fails."""
-    before = _policy()
+    before = thread_policy()
     yield
-    after = _policy()
+    after = thread_policy()
     if after != before:
         os.sched_setscheduler(0, before[0], os.sched_param(before[1]))
         pytest.fail(f"the test left the main thread's scheduling at {after} (policy, priority), found {before}")
-
-
-def _policy() -> tuple[int, int]:
-    if not hasattr(os, "sched_getscheduler"):
-        return (0, 0)
-    return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority

@@ -106,3 +106,10 @@ def unaligned(values: np.ndarray) -> np.ndarray:
     a[...] = values
     assert not a.flags.aligned
     return a
+
+
+def thread_policy(tid: int = 0) -> tuple[int, int]:
+    """A thread's scheduling policy (without SCHED_RESET_ON_FORK) and priority; ``tid`` 0: the calling thread."""
+    if not hasattr(os, "sched_getscheduler"):
+        return (0, 0)
+    return os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK, os.sched_getparam(tid).sched_priority

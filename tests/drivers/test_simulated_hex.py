@@ -11,6 +11,7 @@ import threading
 from collections.abc import Iterator
 
 import pytest
+from helpers import thread_policy
 
 from lapwrench.drivers.ft.wire import CMD_BIAS, CMD_START_REALTIME, CMD_STOP, FTRecord, pack_request, unpack_record
 from lapwrench.drivers.simulated_hex import SimulatedHexBox
@@ -108,7 +109,7 @@ def _fifo_threads() -> set[int]:
     out = set()
     for tid in os.listdir("/proc/self/task"):
         try:
-            if os.sched_getscheduler(int(tid)) == os.SCHED_FIFO:
+            if thread_policy(int(tid))[0] == os.SCHED_FIFO:
                 out.add(int(tid))
         except OSError:  # the thread ended meanwhile
             pass
@@ -147,6 +148,6 @@ def test_fifo_priority_raises_the_device_thread_only(client: socket.socket) -> N
         raised = _fifo_threads() - before
         if _fifo_permitted():
             assert len(raised) == 1 and threading.get_native_id() not in raised
-            assert os.sched_getparam(raised.pop()).sched_priority == 10
+            assert thread_policy(raised.pop()) == (os.SCHED_FIFO, 10)
         else:
             assert not raised

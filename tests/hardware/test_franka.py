@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 from hardware.support import FRANKYSIM_MISSING
+from helpers import thread_policy
 
 from lapwrench.hardware import franka
 from lapwrench.hardware.franka import CollisionThresholds, FrankaRobot, Payload, map_external_force
@@ -82,29 +83,30 @@ def test_the_probe_uses_libfrankas_command_port(monkeypatch: pytest.MonkeyPatch)
     assert seen == [("172.16.0.2", 1337)] and franka.FRANKA_COMMAND_PORT == 1337
 
 
-def _policy(tid: int = 0) -> tuple[int, int]:
-    return os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK, os.sched_getparam(tid).sched_priority
-
-
 def test_libfrankas_real_time_priority_is_not_passed_on_and_is_given_back(frankysim: Any) -> None:
     """libfranka raises the connecting thread to SCHED_FIFO 99 where permitted. While connected, a
     process or thread started from it runs at the normal policy (a browser or a detector at FIFO 99 would
     starve the machine, the loop included); after disconnect the thread has its own policy back."""
-    before = _policy()
+    before = thread_policy()
     robot = FrankaRobot("127.0.0.1", kind="fr3", realtime="ignore", report_external_force=False)
     robot.connect()
     try:
-        connected = _policy()
+        connected = thread_policy()
         child = subprocess.run([sys.executable, "-c", "import os; print(os.sched_getscheduler(0))"],
                                capture_output=True, text=True, timeout=60)
         seen: list[tuple[int, int]] = []
-        t = threading.Thread(target=lambda: seen.append(_policy()))
+        t = threading.Thread(target=lambda: seen.append(thread_policy()))
         t.start()
         t.join()
         robot.read()
     finally:
         robot.disconnect()
-    print(f"\nbefore {before}, connected {connected}, after {_policy()}")
+    print(f"\nbefore {before}, connected {connected}, after {thread_policy()}")
     assert int(child.stdout) == os.SCHED_OTHER, child
     assert seen == [(os.SCHED_OTHER, 0)]
-    assert _policy() == before
+    assert thread_policy() == before
+
+
+def test_error_recovery_needs_a_connection() -> None:
+    with pytest.raises(RobotError, match="not connected"):
+        FrankaRobot("127.0.0.1", kind="fr3").error_recovery()

@@ -323,6 +323,12 @@ class FrankaRobot:
         if sched is not None:
             _set_thread_scheduling(*sched)
 
+    def error_recovery(self) -> None:
+        """``automatic_error_recovery`` (after a reflex), outside of a control session."""
+        if self._robot is None:
+            raise RobotError(f"{self.device}: not connected")
+        self._robot.automatic_error_recovery()
+
 
 # -- the connecting thread's scheduling -------------------------------------------------------------
 # libfranka's start_joint_position_control raises the calling thread to SCHED_FIFO 99 where it may (as
@@ -346,9 +352,3 @@ def _not_inherited() -> None:
 def _set_thread_scheduling(policy: int, priority: int) -> None:
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, policy, os.sched_param(priority))
-
-    def error_recovery(self) -> None:
-        """``automatic_error_recovery`` (after a reflex), outside of a control session."""
-        if self._robot is None:
-            raise RobotError(f"{self.device}: not connected")
-        self._robot.automatic_error_recovery()
