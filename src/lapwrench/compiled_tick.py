@@ -27,12 +27,13 @@ from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import MeasuredFeedback
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState
 from lapwrench.robot.model import KinematicTerms
-from lapwrench.sensors import ValidInputs
+from lapwrench.sensors import ForceTorqueReading, ValidInputs
 from lapwrench.spatial import Mat, Vec, Wrench
 from lapwrench.tick_core import SaturationInputs, tick_stage
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
+from lapwrench.wrenches.grip_weight import without_grip_weight
 
 
 class StageResult(NamedTuple):
@@ -95,14 +96,28 @@ def _reading_args(inputs: ValidInputs) -> tuple[object, ...]:
     )
 
 
+class GripWeight(NamedTuple):
+    """The grip beyond the F/T sensor (:mod:`lapwrench.wrenches.grip_weight`): its mass (kg; 0: none),
+    centre of mass in {H} (m) and the rotation of {H} in {B} where the F/T was tared (column-major)."""
+
+    mass: float
+    com: Vec
+    R_H0: Mat
+
+
 class CompiledTick:
     """The compiled stages bound to one controller's state and configuration."""
 
-    def __init__(self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue]) -> None:
-        """``cues``: the cues that run in Python (not fused into the compiled maths), in order."""
+    def __init__(
+        self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue],
+        grip: GripWeight | None = None,
+    ) -> None:
+        """``cues``: the cues that run in Python (not fused into the compiled maths), in order; ``grip``:
+        whose weight to take off the F/T reading (None or mass 0: nothing)."""
         self.params = params
         self.rcm = rcm
         self.feedback = feedback
+        self.grip = grip if grip is not None and grip.mass > 0.0 else None
         self.cues = list(cues)
         self.null_cues = [c for c in self.cues if c.priority == "null"]
         self.task_cues = [c for c in self.cues if c.priority == "task"]
@@ -112,10 +127,29 @@ class CompiledTick:
     # -- arguments of fixed types --------------------------------------------------------------
     # the readings as they are: the validator hands on C-contiguous float64 arrays of the right shapes only
     # (sensors.py), the types the stages are bound to
-    def _front_args(self, terms: KinematicTerms, inputs: ValidInputs) -> tuple[object, ...]:
+    def _placement(self, inputs: ValidInputs) -> tuple[Mat, Vec, bool]:
+        """{E}'s measured placement (:meth:`MeasuredFeedback.measured_placement`) this tick."""
+        robot = inputs.robot
+        return self.feedback.measured_placement(None if robot is None else robot.q)
+
+    def _without_grip_weight(
+        self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
+    ) -> None:
+        """``inputs.ft`` with the grip's weight taken off (:mod:`lapwrench.wrenches.grip_weight`), at {H}'s
+        measured rotation ({H} is parallel to {E}), at the reference's without a measurement; in place."""
+        ft, grip = inputs.ft, self.grip
+        if ft is None or grip is None:
+            return
+        R_H = placement[0] if placement[2] else terms.R_H
+        force, torque = self._grip_off(ft.force, ft.torque, R_H, grip.R_H0, grip.mass, grip.com)
+        inputs.ft = ForceTorqueReading(force, torque, ft.stamp)
+
+    def _front_args(
+        self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
+    ) -> tuple[object, ...]:
         robot, ft = inputs.robot, inputs.ft
         ext = None if robot is None else robot.external_force
-        R_m, p_m, has_measured = self.feedback.measured_placement(None if robot is None else robot.q)
+        R_m, p_m, has_measured = placement
         return (
             terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
             self.feedback.offsets, R_m, p_m, has_measured, _ZERO3 if ft is None else ft.force, ft is not None,
@@ -123,10 +157,11 @@ class CompiledTick:
         )
 
     def _tick_args(
-        self, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool,
+        self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool], ddq_ref: Vec,
+        stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
         return (
-            *self._front_args(terms, inputs)[:9], *_reading_args(inputs),
+            *self._front_args(terms, inputs, placement)[:9], *_reading_args(inputs),
             _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
         )
 
@@ -150,7 +185,13 @@ class CompiledTick:
         try:
             none = ValidInputs()
             zero = np.zeros(terms.q.shape[0])
-            args = self._tick_args(terms, none, zero, False, R_E0, True)
+            at_rest = self._placement(none)
+            if self.grip is not None:
+                g = self.grip
+                z3 = np.zeros(3)
+                self._grip_off = bind(without_grip_weight, z3, z3, at_rest[0], g.R_H0, g.mass, g.com)
+                self._grip_off(z3, z3, at_rest[0], g.R_H0, g.mass, g.com)
+            args = self._tick_args(terms, none, at_rest, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
             one = np.zeros((1, 6)), np.zeros((1, 3)), np.zeros(3)
@@ -158,7 +199,7 @@ class CompiledTick:
             n = terms.q.shape[0]
             self._buf = np.zeros(front_size(n))  # the kinematics and geometry of the ticks with Python cues
             self._kin, self._geo = front_views(self._buf, n, 0.0)  # views of it, cut once
-            f_args = (*self._front_args(terms, none), self._buf)
+            f_args = (*self._front_args(terms, none, at_rest), self._buf)
             self._front_into = bind(front_into, *f_args)
             _, s_star, _ = self._front_into(*f_args)
             m_args = self._motion_args(s_star, none, _NO_EXTRA, zero, False, R_E0, True)
@@ -174,9 +215,11 @@ class CompiledTick:
     ) -> StageResult:
         """The compiled maths of one tick (module docstring); when the result is not admitted, :attr:`sat`
         holds the saturation inputs."""
+        placement = self._placement(inputs)
+        self._without_grip_weight(terms, inputs, placement)
         if self.cues:
-            return self._run_with_cues(t, terms, inputs, ddq_ref, stopping, R_E0, may_admit)
-        args = self._tick_args(terms, inputs, ddq_ref, stopping, R_E0, may_admit)
+            return self._run_with_cues(t, terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)
+        args = self._tick_args(terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)
         vec3, has_res, W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._tick_stage(*args)
         e_R, p_R, p_G, F_lat, residual = vec3  # row views (unpacking is cheaper than indexing)
         W_r, W_h, W_c, W_f, W_n = W
@@ -197,10 +240,10 @@ class CompiledTick:
         return {name: w for name, w, used in on if used}
 
     def _run_with_cues(
-        self, t: float, terms: KinematicTerms, inputs: ValidInputs, ddq_ref: Vec, stopping: bool, R_E0: Mat,
-        may_admit: bool,
+        self, t: float, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool], ddq_ref: Vec,
+        stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> StageResult:
-        vec3, s_star, has_residual = self._front_into(*self._front_args(terms, inputs), self._buf)
+        vec3, s_star, has_residual = self._front_into(*self._front_args(terms, inputs, placement), self._buf)
         e_R, p_R, p_G, F_lat, residual = vec3  # row views of a new array: what outlives the tick
         geo = self._geo._replace(s_star=s_star)
         extra = self._evaluate_cues(TickContext(t, self._kin, geo, inputs))

@@ -66,6 +66,10 @@ class ScopeConfig:
     lambda0: float = ranged("(0, 1)", 0.8, "fraction of the scope length where the RCM point starts")
     handle_offset: float = ranged("[0, 0.5]", 0.04, "m along the shaft, and shorter than scope.length")
     oblique_angle_deg: float = ranged("[0, 90)", 0.0, "degrees of view angle off the shaft (0, 30, 45, 70)")
+    # The grip: the part of the handle beyond the F/T sensor, whose weight the sensor reads on top of the
+    # hand (lapwrench.wrenches.grip_weight; `lapwrench identify-grip` fits both from a run's log)
+    grip_mass: float = ranged("[0, 2]", 0.1, "kg beyond the handle's F/T sensor; 0: none")
+    grip_com: tuple[float, float, float] = ranged("[-0.2, 0.2]", (0.0, 0.0, 0.01), "m, in {H}, from the F/T sensor")
 
 
 @dataclass(frozen=True)

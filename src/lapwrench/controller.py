@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from lapwrench.compiled_tick import CompiledTick, StageResult
+from lapwrench.compiled_tick import CompiledTick, GripWeight, StageResult
 from lapwrench.config import Config
 from lapwrench.motion.envelope import WALL_NAMES, Envelope
 from lapwrench.motion.measured_feedback import MeasuredFeedback
@@ -171,9 +171,11 @@ class Controller:
         self.event_counts.clear()
 
     # -- setup --------------------------------------------------------------------------------
-    def reset(self, q0: Vec, p_R: Vec | None = None) -> None:
-        """Start at rest at ``q0``; the RCM point is eq (18) unless ``p_R`` is given. Binds and warms up
-        the compiled tick (seconds on a fresh install while numba compiles, milliseconds from its cache)."""
+    def reset(self, q0: Vec, p_R: Vec | None = None, tare_q: Vec | None = None) -> None:
+        """Start at rest at ``q0``; the RCM point is eq (18) unless ``p_R`` is given; ``tare_q``: the joints
+        at which the F/T was tared with the handle untouched (default ``q0``), from where the grip's
+        weight is taken off (:mod:`lapwrench.wrenches.grip_weight`). Binds and warms up the compiled
+        tick (seconds on a fresh install while numba compiles, milliseconds from its cache)."""
         q0 = np.asarray(q0, dtype=float)
         n = self.model.nq
         if q0.shape != (n,) or not np.all(np.isfinite(q0)):
@@ -181,6 +183,7 @@ class Controller:
         lim = self.model.limits
         if np.any(q0 < lim.position_lower) or np.any(q0 > lim.position_upper):
             raise ValueError("initial configuration is outside the joint limits")
+        R_H_tare = None if tare_q is None else self._tare_rotation(tare_q)  # checked before anything changes
         rest = np.zeros(self.model.nv)
         self.ref = ReferenceState(q0.copy(), rest.copy(), rest.copy())
         kin = self.model.kinematics(q0, rest)
@@ -189,7 +192,11 @@ class Controller:
         self.rcm = AdaptiveRcm(self.cfg.adaptive_rcm, np.asarray(p_R, dtype=float))
         self.envelope.reset(kin)
         self.feedback.reset()
-        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues)
+        # every runner tares the F/T with the handle untouched at the pose it first starts the controller
+        # from; the grip's weight is taken off relative to {H} there (lapwrench.wrenches.grip_weight)
+        R_H0 = kin.R_H.copy() if R_H_tare is None else R_H_tare
+        grip = GripWeight(float(self.cfg.scope.grip_mass), np.array(self.cfg.scope.grip_com, dtype=float), R_H0)
+        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues, grip)
         terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
         self.compiled.bind(terms, self.envelope.R_E0)
@@ -197,6 +204,16 @@ class Controller:
         self.infeasible_ticks = 0
         self.events.clear()
         self.event_counts.clear()
+
+    def _tare_rotation(self, tare_q: Vec) -> Vec:
+        """{H}'s rotation at the joints ``tare_q`` (checked like ``q0``)."""
+        try:
+            q = np.asarray(tare_q, dtype=float)
+        except (TypeError, ValueError):
+            q = np.zeros(0)
+        if q.shape != (self.model.nq,) or not np.all(np.isfinite(q)):
+            raise ValueError(f"tare_q must be {self.model.nq} finite joint positions")
+        return self.model.kinematics(q, np.zeros(self.model.nv)).R_H.copy()
 
     # -- the tick -----------------------------------------------------------------------------
     def tick(self, frame: SensorFrame) -> TickResult:

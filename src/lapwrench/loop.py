@@ -126,14 +126,15 @@ class ControlLoop:
     def session_time(self, now: float | None = None) -> float:
         return (self.clock() if now is None else now) - self.t0
 
-    def start(self, p_R: Vec | None = None) -> RobotReading:
-        """Connect the robot, reset the controller at its pose and start supervision."""
+    def start(self, p_R: Vec | None = None, tare_q: Vec | None = None) -> RobotReading:
+        """Connect the robot, reset the controller at its pose and start supervision. ``tare_q``: where the
+        F/T was tared, when not at this pose (a restart; see :meth:`Controller.reset`)."""
         reading = self.robot.connect()
         self.t0 = self.clock()
         for s in self.sources:
             if hasattr(s, "t0"):
                 s.t0 = self.t0  # type: ignore[attr-defined]
-        self.controller.reset(reading.q, p_R)
+        self.controller.reset(reading.q, p_R, tare_q)
         assert self.controller.rcm is not None
         measure_scope(self.controller.model, reading.q, self.controller.rcm.p_R)  # loads its compiled code now
         self.supervisor.start(reading.q, 0.0)

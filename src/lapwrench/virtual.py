@@ -24,6 +24,7 @@ from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading
 from lapwrench.sources import Observable, Source
 from lapwrench.spatial import Mat, Vec
+from lapwrench.wrenches.grip_weight import grip_weight_change
 
 # Scope pointing straight down, arm comfortably inside its limits: the Panda's (and FR3's) home pose.
 DEFAULT_Q0 = np.array(arm_spec("panda").home_pose)
@@ -136,9 +137,19 @@ def run_virtual(
         pixels[0] = uv[vis]
         return InstrumentObservation(pixels[0], t)
 
+    grip_mass, grip_com = float(cfg.scope.grip_mass), np.array(cfg.scope.grip_com, dtype=float)
+    R_H0 = ctrl.model.kinematics(robot.q, robot.dq).R_H  # where the sensor is tared, the handle untouched
+
+    def read_ft(t: float) -> ForceTorqueReading:
+        """The hand's wrench plus what the grip's weight adds since the tare, as a real sensor reads it."""
+        force, torque = hand.force(t), hand.torque(t)
+        if grip_mass > 0.0:
+            dF, dT = grip_weight_change(ctrl.model.kinematics(robot.q, robot.dq).R_H, R_H0, grip_mass, grip_com)
+            force, torque = force + dF, torque + dT
+        return ForceTorqueReading(force, torque, t)
+
     sources: list[Source] = [
-        Observable("ft", lambda t: ForceTorqueReading(hand.force(t), hand.torque(t), t), update_interval=dt,
-                   max_age=dt),
+        Observable("ft", read_ft, update_interval=dt, max_age=dt),
         Observable("tactile", lambda t: TactileReading(tactile_for_delta(hand.delta(t), cfg.interaction.k_H), t),
                    update_interval=dt, max_age=dt),
     ]

@@ -47,11 +47,13 @@ def _leaves(cfg: Config) -> list[tuple[str, dataclasses.Field, Any]]:
 
 def _assert_sane(cfg: Config) -> None:
     for key, f, value in _leaves(cfg):
-        if isinstance(value, float):
-            assert math.isfinite(value), key
+        values = value if isinstance(value, tuple) else (value,)  # a vector's range holds for each element
+        for v in values:
+            if isinstance(v, float):
+                assert math.isfinite(v), key
         bounds = f.metadata.get("range")
         if bounds is not None:
-            assert value in bounds, (key, value)
+            assert all(v in bounds for v in values), (key, value)
 
 
 def _assert_short(err: ConfigError) -> None:

@@ -7,8 +7,11 @@ import itertools
 import numpy as np
 import pytest
 
+from lapwrench.config import Config
 from lapwrench.robot.model import RobotModel
 from lapwrench.sim.robot import ForceEstimateConfig, SimRobot
+from lapwrench.sim.scene.build import build_scene
+from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.sensors import (
     NOISE_BLOCK_SAMPLES,
     ExternalForceObserver,
@@ -18,6 +21,7 @@ from lapwrench.sim.sensors import (
     TactileGripModel,
 )
 from lapwrench.sim.world import SimWorld
+from lapwrench.wrenches.grip_weight import grip_weight_change
 from lapwrench.wrenches.interaction import grip_gain
 
 
@@ -31,22 +35,46 @@ def _hold(world: SimWorld, ticks: int) -> None:
         world.step(world.scene.q0)
 
 
-def test_ft_sensor_measures_only_the_hand(world: SimWorld) -> None:
+def test_ft_sensor_measures_the_hand_and_the_grips_weight(world: SimWorld) -> None:
+    """The trocar's push never reaches the handle sensor; the hand's wrench does, and so does what the
+    grip's weight adds as the scope turns from where the sensor was tared (lapwrench.wrenches.grip_weight)."""
     world.reset()
     world.set_housing_load(world.housing_load_for_shift(np.array([0.0, 0.01])))  # trocar pushes the scope
     ft = SimForceTorqueSensor(world, ForceTorqueNoise(force_sigma=0.0, torque_sigma=0.0))
     _hold(world, 300)
     ft.tare()
+    _, R_H0 = world.frame_pose("lap_H")
     assert np.linalg.norm(world.contact_force()) > 5.0
     force, torque = np.array([3.0, -2.0, 1.0]), np.array([0.05, -0.02, 0.1])
     world.set_hand_wrench(force=force, torque=torque)
     _hold(world, 50)
     r = ft.read(1.0)
     _, R_H = world.frame_pose("lap_H")
-    np.testing.assert_allclose(R_H @ r.force, force, atol=1e-6)
-    np.testing.assert_allclose(R_H @ r.torque, torque, atol=1e-6)
+    scope = world.scene.config.scope
+    assert scope.grip_mass > 0.0
+    dF, dT = grip_weight_change(R_H, R_H0, scope.grip_mass, np.array(scope.grip_com))
+    assert np.linalg.norm(dF) > 1e-4  # the scope turned: the weight's share changed
+    # what is left is the grip's inertia, m a: 6 mN here, as the push accelerates the arm
+    np.testing.assert_allclose(R_H @ (r.force - dF), force, atol=1e-2)
+    np.testing.assert_allclose(R_H @ (r.torque - dT), torque, atol=1e-3)
     world.set_hand_wrench()
     world.set_housing_load(np.zeros(3))
+
+
+def test_ft_sensor_reads_the_grips_weight_at_rest() -> None:
+    """Untared and untouched, the sensor reads m R_Hᵀ g and c x (m R_Hᵀ g); a grip of mass 0 reads nothing."""
+    for mass in (0.1, 0.0):
+        cfg = Config().replace(scope={"grip_mass": mass, "grip_com": [0.01, -0.02, 0.03]})
+        w = SimWorld(build_scene(SceneConfig.from_config(cfg)))
+        ft = SimForceTorqueSensor(w, ForceTorqueNoise(force_sigma=0.0, torque_sigma=0.0, force_bias=(0.0, 0.0, 0.0),
+                                                      torque_bias=(0.0, 0.0, 0.0)))
+        _hold(w, 20)
+        _, R_H = w.frame_pose("lap_H")
+        r = ft.read(0.0)
+        weight = mass * R_H.T @ np.array([0.0, 0.0, -9.81])
+        np.testing.assert_allclose(r.force, weight, atol=1e-4)
+        np.testing.assert_allclose(r.torque, np.cross([0.01, -0.02, 0.03], weight), atol=1e-5)
+        w.close()
 
 
 def test_ft_noise_bias_and_rate(world: SimWorld) -> None:

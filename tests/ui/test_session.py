@@ -181,3 +181,28 @@ def test_the_no_render_camera_keeps_the_frame_clock() -> None:
     cam = NoRenderCamera(25.0)
     captured = sum(cam.capture(k * 0.001) for k in range(1000))
     assert captured == 25
+
+
+def test_a_restart_takes_the_grips_weight_off_from_where_the_sensor_was_tared(session: Session, cfg: Config) -> None:
+    """The F/T is tared once, at the loop's first start; a restart (here for a parameter change) at a pose
+    the scope has since turned to must keep taking the grip's weight off relative to that first pose:
+    gripped and untouched after the restart, the interaction force stays at the sensor's noise."""
+    assert cfg.scope.grip_mass > 0.0
+    ctrl = session.closed.controller
+    tared = ctrl.model.kinematics(session.closed.q0, np.zeros(ctrl.model.nv)).R_H
+    _, d0 = session.closed.world.shaft_axis()
+    session.hand.set_grip_level("high")
+    session.hand.set_push(0.0, 15.0)
+    run(session, 6.0)
+    session.hand.set_push(0.0, 0.0)
+    run(session, 0.5)
+    _, d1 = session.closed.world.shaft_axis()
+    assert angle_deg(d0, d1) > 10.0
+    session.request_config(cfg.replace(viscous={"k_t": 151.0}))
+    run(session, 1.0)
+    assert not session.config_pending and session.closed.controller.cfg.viscous.k_t == 151.0
+    grip = session.closed.controller.compiled.grip  # type: ignore[union-attr]
+    assert grip is not None
+    np.testing.assert_allclose(grip.R_H0, tared, atol=1e-12)
+    F_h = [r.wrenches["interaction"][3:] for r in run(session, 1.0) if r is not None]
+    assert len(F_h) == 1000 and np.linalg.norm(np.mean(F_h, axis=0)) < 0.1

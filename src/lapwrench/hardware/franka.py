@@ -118,23 +118,27 @@ class Payload:
 
     @classmethod
     def from_scope(cls, scope: ScopeGeometry) -> Payload:
-        """The laparoscope assembly as a load: a uniform shaft along +z plus a handle cylinder.
+        """The laparoscope assembly as a load: a uniform shaft along +z, a handle cylinder and the grip
+        beyond the F/T sensor (a point mass at its centre of mass).
 
         The mounting adapter is folded into the handle. Check against a Franka load
         identification (Desk) before relying on the force estimate.
         """
-        m_s, m_h = scope.shaft_mass, scope.handle_mass
+        m_s, m_h, m_g = scope.shaft_mass, scope.handle_mass, scope.grip_mass
         z_s, z_h = scope.length / 2.0, scope.handle_offset
-        m = m_s + m_h
-        z_c = (m_s * z_s + m_h * z_h) / m
+        g = np.array(scope.grip_com, dtype=float) + np.array([0.0, 0.0, z_h])  # the grip's centre of mass in {E}
+        m = m_s + m_h + m_g
+        c = (m_s * np.array([0.0, 0.0, z_s]) + m_h * np.array([0.0, 0.0, z_h]) + m_g * g) / m
         i_zz = 0.5 * m_h * scope.handle_radius**2 + 0.5 * m_s * (scope.shaft_diameter / 2) ** 2
         i_xx = (
             m_s * scope.length**2 / 12.0
-            + m_s * (z_s - z_c) ** 2
+            + m_s * (z_s - c[2]) ** 2
             + m_h * (3 * scope.handle_radius**2 + scope.handle_length**2) / 12.0
-            + m_h * (z_h - z_c) ** 2
+            + m_h * (z_h - c[2]) ** 2
+            + m_g * (g[2] - c[2]) ** 2
         )
-        return cls(m, (0.0, 0.0, z_c), (i_xx, 0.0, 0.0, 0.0, i_xx, 0.0, 0.0, 0.0, i_zz))
+        com = (float(c[0]), float(c[1]), float(c[2]))
+        return cls(m, com, (i_xx, 0.0, 0.0, 0.0, i_xx, 0.0, 0.0, 0.0, i_zz))
 
 
 def map_external_force(O_F_ext_hat_K: Any, sign: ExtWrenchSign) -> Vec:

@@ -9,6 +9,8 @@ Frames (paper Sec. II-B). All are parallel to {E} by default:
 
 - ``lap_E``: end-effector {E}, on the flange at the spec's scope mount; +z runs along the shaft.
 - ``lap_H``: handle {H}, where the F/T sensor sits, ``handle_offset`` along +z from {E}.
+- ``lap_grip``: the grip beyond the sensor, on {H} (its mass ``grip_mass`` at ``grip_com`` in {H}): what
+  the hand holds, so the sensor reads its weight with the hand's wrench.
 - ``lap_C``: camera {C} at the scope tip, ``L`` along +z. With an oblique scope it is rotated
   about x_E by ``oblique_angle_deg`` (the paper's convention is the parallel frame).
 - ``lap_tip``: the distal end of the shaft (same origin as {C}, always parallel to {E}).
@@ -30,11 +32,12 @@ RobotKind = str
 
 FRAME_E = "lap_E"
 FRAME_H = "lap_H"
+FRAME_GRIP = "lap_grip"
 FRAME_C = "lap_C"
 FRAME_TIP = "lap_tip"
 
 __all__ = [
-    "ARM_SPECS", "FRAME_C", "FRAME_E", "FRAME_H", "FRAME_TIP", "MAX_JOINTS", "ROBOT_KINDS", "ArmSpec",
+    "ARM_SPECS", "FRAME_C", "FRAME_E", "FRAME_GRIP", "FRAME_H", "FRAME_TIP", "MAX_JOINTS", "ROBOT_KINDS", "ArmSpec",
     "RobotDescriptionError", "RobotKind", "ScopeGeometry", "arm_spec", "arm_urdf_path", "build_urdf",
 ]
 
@@ -51,15 +54,18 @@ class ScopeGeometry:
     shaft_diameter: float = 0.010
     shaft_mass: float = 0.25
     handle_offset: float = 0.04
-    handle_mass: float = 0.55
+    handle_mass: float = 0.45  # on the flange side of the F/T sensor (0.55 kg with the grip)
     handle_radius: float = 0.02
     handle_length: float = 0.06
     oblique_angle_deg: float = 0.0
+    grip_mass: float = 0.1  # beyond the F/T sensor: the sensor reads its weight
+    grip_com: tuple[float, float, float] = (0.0, 0.0, 0.01)  # in {H}
 
     @classmethod
     def from_config(cls, scope: ScopeConfig) -> ScopeGeometry:
         """The geometry a configuration's ``scope`` section describes (other fields: defaults)."""
-        return cls(length=scope.length, handle_offset=scope.handle_offset, oblique_angle_deg=scope.oblique_angle_deg)
+        return cls(length=scope.length, handle_offset=scope.handle_offset, oblique_angle_deg=scope.oblique_angle_deg,
+                   grip_mass=scope.grip_mass, grip_com=tuple(scope.grip_com))  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         for name in ("length", "shaft_diameter", "shaft_mass", "handle_mass", "handle_radius", "handle_length"):
@@ -70,6 +76,10 @@ class ScopeGeometry:
             raise ValueError(f"scope.handle_offset must lie in [0, length), got {self.handle_offset!r}")
         if not (0.0 <= self.oblique_angle_deg < 90.0):
             raise ValueError(f"scope.oblique_angle_deg must lie in [0, 90), got {self.oblique_angle_deg!r}")
+        if not (math.isfinite(self.grip_mass) and self.grip_mass >= 0.0):
+            raise ValueError(f"scope.grip_mass must be a finite number >= 0, got {self.grip_mass!r}")
+        if len(self.grip_com) != 3 or not all(math.isfinite(c) and abs(c) <= 0.2 for c in self.grip_com):
+            raise ValueError(f"scope.grip_com must be 3 finite numbers within 0.2 m, got {self.grip_com!r}")
 
 
 def arm_urdf_path(kind: RobotKind) -> Path:
@@ -141,16 +151,21 @@ def _add_link(
     radius: float = 0.0,
     length: float = 0.0,
     com_z: float = 0.0,
+    com: tuple[float, float, float] | None = None,
+    shape: bool = True,
 ) -> None:
+    """A link on a fixed joint; with ``mass``, a cylinder's inertia at ``com`` (default (0, 0, com_z)),
+    drawn as that cylinder unless not ``shape``."""
     link = ET.SubElement(root, "link", name=name)
     if mass > 0.0:
+        at = " ".join(f"{c:.9g}" for c in (com or (0.0, 0.0, com_z)))
         inertial = ET.SubElement(link, "inertial")
-        ET.SubElement(inertial, "origin", xyz=f"0 0 {com_z:.9g}", rpy="0 0 0")
+        ET.SubElement(inertial, "origin", xyz=at, rpy="0 0 0")
         ET.SubElement(inertial, "mass", value=f"{mass:.9g}")
         ET.SubElement(inertial, "inertia", **_cylinder_inertia(mass, radius, length))
-        for tag in ("visual", "collision"):
+        for tag in ("visual", "collision") if shape else ():
             el = ET.SubElement(link, tag)
-            ET.SubElement(el, "origin", xyz=f"0 0 {com_z:.9g}", rpy="0 0 0")
+            ET.SubElement(el, "origin", xyz=at, rpy="0 0 0")
             geom = ET.SubElement(el, "geometry")
             ET.SubElement(geom, "cylinder", radius=f"{radius:.9g}", length=f"{length:.9g}")
     joint = ET.SubElement(root, "joint", name=f"{name}_joint", type="fixed")
@@ -181,6 +196,10 @@ def build_urdf(kind: RobotKind = "panda", scope: ScopeGeometry | None = None) ->
         mass=scope.shaft_mass, radius=scope.shaft_diameter / 2.0, length=L, com_z=L / 2.0,
     )
     _add_link(root, FRAME_H, FRAME_E, (0.0, 0.0, scope.handle_offset))
+    # the grip hangs on {H}: the F/T sensor between {H} and the scope carries its weight (inside the handle's
+    # drawn cylinder, so not drawn itself)
+    _add_link(root, FRAME_GRIP, FRAME_H, (0.0, 0.0, 0.0), mass=scope.grip_mass, radius=scope.handle_radius,
+              length=scope.handle_length, com=scope.grip_com, shape=False)
     _add_link(root, FRAME_TIP, FRAME_E, (0.0, 0.0, L))
     _add_link(root, FRAME_C, FRAME_E, (0.0, 0.0, L), (-math.radians(scope.oblique_angle_deg), 0.0, 0.0))
     root.set("name", f"{kind}_laparoscope")

@@ -87,8 +87,9 @@ def rcm_on_axis(closed: ClosedLoop) -> np.ndarray | None:
 def restart_loop(closed: ClosedLoop, p_R: np.ndarray | None) -> None:
     """Restart the control loop at the measured pose: the controller reset at rest with RCM point
     ``p_R`` (see :func:`rcm_on_axis`), supervision restarted, and the session time kept equal to the
-    simulated time."""
-    closed.loop.start(p_R)
+    simulated time. The F/T keeps its tare from the loop's first start (at ``closed.q0``), so the grip's
+    weight is still taken off relative to there."""
+    closed.loop.start(p_R, tare_q=closed.q0)
     closed.loop.t0 = 0.0  # session time = simulated time, as the sources and the detector count it
 
 
