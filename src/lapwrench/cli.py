@@ -232,6 +232,11 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("log-report", help="turn an MCAP run log into plots")
     hardware_cli.add_log_report_arguments(rep)
     rep.set_defaults(func=hardware_cli.log_report_main)
+    from lapwrench.hardware import grip_identify
+
+    grip = sub.add_parser("identify-grip", help="fit the handle grip's mass and centre of mass from a run log")
+    grip_identify.add_identify_grip_arguments(grip)
+    grip.set_defaults(func=grip_identify.identify_grip_main)
 
     from lapwrench.perception import cli as perception_cli
 
