@@ -151,3 +151,18 @@ def test_config_does_not_depend_on_the_drivers() -> None:
         imported += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
         allowed = ("lapwrench.config_yaml", "lapwrench.config_ranges", "lapwrench.config_cues", "lapwrench.robot_kinds")
         assert not [m for m in imported if m.startswith("lapwrench.") and m not in allowed]
+
+
+def test_to_dict_is_plain_yaml_data_that_reads_back() -> None:
+    """Vectors (scope.grip_com, a cue's centre) are lists, so the dict survives a YAML or JSON round trip
+    unchanged (a study stores it and compares it, and hashes it to resume), and builds the same Config."""
+    import json
+
+    from lapwrench.config import to_dict
+
+    cfg = Config().replace(scope={"grip_com": [0.01, 0.0, 0.02]}, cues={"keep_out": {}})
+    d = to_dict(cfg)
+    assert d["scope"]["grip_com"] == [0.01, 0.0, 0.02]
+    assert yaml.safe_load(yaml.safe_dump(d)) == d
+    assert json.loads(json.dumps(d)) == d
+    assert from_dict(d) == cfg

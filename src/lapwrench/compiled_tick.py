@@ -33,7 +33,7 @@ from lapwrench.tick_core import SaturationInputs, tick_stage
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
-from lapwrench.wrenches.grip_weight import without_grip_weight
+from lapwrench.wrenches.ft_zero import conditioned_ft
 
 
 class StageResult(NamedTuple):
@@ -96,13 +96,20 @@ def _reading_args(inputs: ValidInputs) -> tuple[object, ...]:
     )
 
 
-class GripWeight(NamedTuple):
-    """The grip beyond the F/T sensor (:mod:`lapwrench.wrenches.grip_weight`): its mass (kg; 0: none),
-    centre of mass in {H} (m) and the rotation of {H} in {B} where the F/T was tared (column-major)."""
+class FtConditioning(NamedTuple):
+    """What is taken off the handle F/T reading before any cue reads it: the grip's weight
+    (:mod:`lapwrench.wrenches.grip_weight`: ``grip_mass`` kg, 0 for none, at ``grip_com`` m in {H}; R_H0
+    the rotation of {H} in {B} where the F/T was tared) and the zero kept while nobody touches the grip
+    (:mod:`lapwrench.wrenches.ft_zero`, time constant ``zero_time`` s, 0 for off)."""
 
-    mass: float
-    com: Vec
+    grip_mass: float
+    grip_com: Vec
     R_H0: Mat
+    zero_time: float = 0.0
+
+    @property
+    def active(self) -> bool:
+        return self.grip_mass > 0.0 or self.zero_time > 0.0
 
 
 class CompiledTick:
@@ -110,14 +117,16 @@ class CompiledTick:
 
     def __init__(
         self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue],
-        grip: GripWeight | None = None,
+        ft: FtConditioning | None = None,
     ) -> None:
-        """``cues``: the cues that run in Python (not fused into the compiled maths), in order; ``grip``:
-        whose weight to take off the F/T reading (None or mass 0: nothing)."""
+        """``cues``: the cues that run in Python (not fused into the compiled maths), in order; ``ft``: what
+        to take off the F/T reading (None, or nothing active: the reading as it is)."""
         self.params = params
         self.rcm = rcm
         self.feedback = feedback
-        self.grip = grip if grip is not None and grip.mass > 0.0 else None
+        self.ft = ft if ft is not None and ft.active else None
+        self.ft_zero = np.zeros(6)  # the F/T's zero [force; torque] (lapwrench.wrenches.ft_zero), from the tare
+        self._zero_gain = 0.0 if ft is None or ft.zero_time <= 0.0 else min(1.0, params.dt / ft.zero_time)
         self.cues = list(cues)
         self.null_cues = [c for c in self.cues if c.priority == "null"]
         self.task_cues = [c for c in self.cues if c.priority == "task"]
@@ -132,16 +141,18 @@ class CompiledTick:
         robot = inputs.robot
         return self.feedback.measured_placement(None if robot is None else robot.q)
 
-    def _without_grip_weight(
-        self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
-    ) -> None:
-        """``inputs.ft`` with the grip's weight taken off (:mod:`lapwrench.wrenches.grip_weight`), at {H}'s
-        measured rotation ({H} is parallel to {E}), at the reference's without a measurement; in place."""
-        ft, grip = inputs.ft, self.grip
-        if ft is None or grip is None:
+    def _condition_ft(self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]) -> None:
+        """``inputs.ft`` as the hand's wrench (:class:`FtConditioning`; in place): the grip's weight at {H}'s
+        measured rotation ({H} is parallel to {E}; the reference's without a measurement), and the zero."""
+        ft, c = inputs.ft, self.ft
+        if ft is None or c is None:
             return
         R_H = placement[0] if placement[2] else terms.R_H
-        force, torque = self._grip_off(ft.force, ft.torque, R_H, grip.R_H0, grip.mass, grip.com)
+        tactile = inputs.tactile
+        force, torque = self._conditioned(
+            ft.force, ft.torque, R_H, c.R_H0, c.grip_mass, c.grip_com, self.ft_zero, self._zero_gain,
+            _NO_TACTILE if tactile is None else tactile.values, tactile is not None, self.params.contact_threshold,
+        )
         inputs.ft = ForceTorqueReading(force, torque, ft.stamp)
 
     def _front_args(
@@ -186,11 +197,12 @@ class CompiledTick:
             none = ValidInputs()
             zero = np.zeros(terms.q.shape[0])
             at_rest = self._placement(none)
-            if self.grip is not None:
-                g = self.grip
-                z3 = np.zeros(3)
-                self._grip_off = bind(without_grip_weight, z3, z3, at_rest[0], g.R_H0, g.mass, g.com)
-                self._grip_off(z3, z3, at_rest[0], g.R_H0, g.mass, g.com)
+            if self.ft is not None:
+                c, z3 = self.ft, np.zeros(3)
+                ft_args = (z3, z3, at_rest[0], c.R_H0, c.grip_mass, c.grip_com, np.zeros(6), self._zero_gain,
+                           _NO_TACTILE, False, self.params.contact_threshold)
+                self._conditioned = bind(conditioned_ft, *ft_args)
+                self._conditioned(*ft_args)
             args = self._tick_args(terms, none, at_rest, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
@@ -216,7 +228,7 @@ class CompiledTick:
         """The compiled maths of one tick (module docstring); when the result is not admitted, :attr:`sat`
         holds the saturation inputs."""
         placement = self._placement(inputs)
-        self._without_grip_weight(terms, inputs, placement)
+        self._condition_ft(terms, inputs, placement)
         if self.cues:
             return self._run_with_cues(t, terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)
         args = self._tick_args(terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)

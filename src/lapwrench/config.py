@@ -81,6 +81,8 @@ class InteractionConfig:
     )
     force_range: float = ranged("[1, 2000]", 200.0, "N, an F/T sensor's measuring range (HEX-E: 200)")
     torque_range: float = ranged("[0.1, 200]", 10.0, "N m, an F/T sensor's measuring range (HEX-E: 10)")
+    # the F/T's zero follows its reading while nobody touches the grip (lapwrench.wrenches.ft_zero)
+    auto_zero_time: float = ranged("[0, 600]", 2.0, "s, time constant of the untouched F/T's zero; 0: off")
 
 
 @dataclass(frozen=True)
@@ -315,9 +317,19 @@ def from_dict(data: dict[str, Any]) -> Config:
 
 
 def to_dict(cfg: Config) -> dict[str, Any]:
-    d = dataclasses.asdict(cfg)
+    """The configuration as plain YAML data (vectors as lists): what :func:`from_dict` reads back."""
+    d = {k: _plain(v) for k, v in dataclasses.asdict(cfg).items()}
     d["cues"] = cues_to_dict(cfg.cues)
     return d
+
+
+def _plain(x: Any) -> Any:
+    """Tuples as lists, inside mappings too (what a YAML or JSON round trip gives back)."""
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, tuple | list):
+        return [_plain(v) for v in x]
+    return x
 
 
 def presets() -> list[str]:

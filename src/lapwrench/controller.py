@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from lapwrench.compiled_tick import CompiledTick, GripWeight, StageResult
+from lapwrench.compiled_tick import CompiledTick, FtConditioning, StageResult
 from lapwrench.config import Config
 from lapwrench.motion.envelope import WALL_NAMES, Envelope
 from lapwrench.motion.measured_feedback import MeasuredFeedback
@@ -195,8 +195,10 @@ class Controller:
         # every runner tares the F/T with the handle untouched at the pose it first starts the controller
         # from; the grip's weight is taken off relative to {H} there (lapwrench.wrenches.grip_weight)
         R_H0 = kin.R_H.copy() if R_H_tare is None else R_H_tare
-        grip = GripWeight(float(self.cfg.scope.grip_mass), np.array(self.cfg.scope.grip_com, dtype=float), R_H0)
-        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues, grip)
+        sc = self.cfg.scope
+        ft = FtConditioning(float(sc.grip_mass), np.array(sc.grip_com, dtype=float), R_H0,
+                            float(self.cfg.interaction.auto_zero_time))
+        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues, ft)
         terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
         self.compiled.bind(terms, self.envelope.R_E0)
