@@ -83,3 +83,39 @@ def test_every_playable_scenario_has_a_button_and_the_status_line_says_which_one
     for _ in range(10):
         session.step()
     assert "playing" not in status_text(session.snapshot, 1.0, False, 25.0)
+
+
+def test_a_drag_end_during_the_page_threads_pull_update_leaves_the_hand_released(controls: Controls) -> None:
+    """The drag's end (viser's event loop) can arrive while the page thread is updating the pull of a
+    dragged gizmo (follow_handle). It must win: after it, no pull is left on the hand. Here the end is
+    sent from another thread at the moment follow_handle sets the pull; without mutual exclusion the
+    page thread's pull lands after the end and the hand keeps pulling (the CI failure of
+    test_app's gizmo drag: 'timed out waiting for the gizmo's release')."""
+    import threading
+    from types import SimpleNamespace
+
+    session = controls.session
+    for _ in range(20):
+        session.step()
+    snap = session.snapshot
+    assert snap is not None
+    controls.gizmo.position = snap.hand_point + np.array([0.01, 0.0, 0.0])
+    controls._on_gizmo(SimpleNamespace(phase="update", target=controls.gizmo))
+    assert controls.dragging and np.any(session.hand.gizmo)
+    hand_set = session.hand.set_gizmo
+    ender = threading.Thread(target=controls._on_gizmo, args=(SimpleNamespace(phase="end", target=controls.gizmo),))
+
+    def set_gizmo_while_the_end_arrives(pull: np.ndarray) -> None:
+        if not ender.is_alive() and ender.ident is None:
+            ender.start()
+            ender.join(0.3)  # the end's thread runs now, unless it must wait for this update to finish
+        hand_set(pull)
+
+    session.hand.set_gizmo = set_gizmo_while_the_end_arrives  # type: ignore[method-assign]
+    try:
+        controls.follow_handle(snap)
+        ender.join(5.0)
+    finally:
+        session.hand.set_gizmo = hand_set  # type: ignore[method-assign]
+    assert not controls.dragging
+    assert not np.any(session.hand.gizmo)

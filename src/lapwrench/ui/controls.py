@@ -47,6 +47,10 @@ class Controls:
         self.resume_button = gui.add_button("Resume after hold", visible=False)
         self.resume_button.on_click(self.guarded(lambda _e: session.resume()))
         self.dragging = False
+        # the gizmo's drag events (viser's event loop) and follow_handle (the page thread) both set the
+        # hand's pull: one at a time, or a drag's end could be followed by the page thread's last pull and
+        # leave the hand pulling after the release
+        self._gizmo_lock = threading.RLock()
         self._build_hand(gui)
         self._build_instruments(gui)
         self._build_scenarios(gui)
@@ -106,22 +110,24 @@ class Controls:
         self.delta.value = 0.0
 
     def _on_gizmo(self, event: Any) -> None:
-        snap = self.session.snapshot
-        if event.phase == "end" or snap is None:
-            self.dragging = False
-            self.session.hand.set_gizmo(np.zeros(3))
-            return
-        self.dragging = True
-        self.session.hand.set_gizmo(np.asarray(event.target.position, float) - snap.hand_point)
+        with self._gizmo_lock:
+            snap = self.session.snapshot
+            if event.phase == "end" or snap is None:
+                self.dragging = False
+                self.session.hand.set_gizmo(np.zeros(3))
+                return
+            self.dragging = True
+            self.session.hand.set_gizmo(np.asarray(event.target.position, float) - snap.hand_point)
 
     def follow_handle(self, snapshot: Snapshot) -> None:
         """Keep the gizmo on the handle while it is not dragged; while dragged, its pull follows the
         handle (a spring between the handle and the gizmo)."""
-        if not self.dragging:
-            if np.max(np.abs(np.asarray(self.gizmo.position) - snapshot.hand_point)) > 1e-4:
-                self.gizmo.position = snapshot.hand_point
-        else:
-            self.session.hand.set_gizmo(np.asarray(self.gizmo.position, float) - snapshot.hand_point)
+        with self._gizmo_lock:
+            if not self.dragging:
+                if np.max(np.abs(np.asarray(self.gizmo.position) - snapshot.hand_point)) > 1e-4:
+                    self.gizmo.position = snapshot.hand_point
+            else:
+                self.session.hand.set_gizmo(np.asarray(self.gizmo.position, float) - snapshot.hand_point)
 
     # -- instruments --------------------------------------------------------------------------
     def _build_instruments(self, gui: Any) -> None:
