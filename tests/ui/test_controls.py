@@ -100,10 +100,10 @@ def test_a_drag_end_during_the_page_threads_pull_update_leaves_the_hand_released
     snap = session.snapshot
     assert snap is not None
     controls.gizmo.position = snap.hand_point + np.array([0.01, 0.0, 0.0])
-    controls._on_gizmo(SimpleNamespace(phase="update", target=controls.gizmo))
+    controls.gizmo_event(SimpleNamespace(phase="update", target=controls.gizmo))
     assert controls.dragging and np.any(session.hand.gizmo)
     hand_set = session.hand.set_gizmo
-    ender = threading.Thread(target=controls._on_gizmo, args=(SimpleNamespace(phase="end", target=controls.gizmo),))
+    ender = threading.Thread(target=controls.gizmo_event, args=(SimpleNamespace(phase="end", target=controls.gizmo),))
 
     def set_gizmo_while_the_end_arrives(pull: np.ndarray) -> None:
         if not ender.is_alive() and ender.ident is None:

@@ -55,7 +55,7 @@ class Controls:
         self._build_instruments(gui)
         self._build_scenarios(gui)
         self.gizmo = server.scene.add_transform_controls("/handle_gizmo", scale=GIZMO_SCALE, disable_rotations=True)
-        on_gizmo = self.guarded(self._on_gizmo)
+        on_gizmo = self.guarded(self.gizmo_event)
 
         async def on_gizmo_in_order(event: Any) -> None:
             """On viser's event loop, so start, updates and end arrive in order (a plain callback runs
@@ -109,7 +109,8 @@ class Controls:
         self.torque.value = 0.0
         self.delta.value = 0.0
 
-    def _on_gizmo(self, event: Any) -> None:
+    def gizmo_event(self, event: Any) -> None:
+        """A drag event of the handle gizmo (start, update or end; from viser): the hand's pull follows it."""
         with self._gizmo_lock:
             snap = self.session.snapshot
             if event.phase == "end" or snap is None:
