@@ -18,42 +18,19 @@ that has nothing to show says so in one sentence, and the report is always writt
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from lapwrench.study.plots import MISSING, numeric, param_groups, plot_distributions, plot_pareto, safe_name, text
+from lapwrench.study.spec import Comparison, ReportSpec
 
 MAX_FAILURES = 200
 """At most this many failed rows are listed; the rest are counted."""
 
 MAX_ERROR_CHARS = 500
 """An error text longer than this is cut (the full text stays in the rows table)."""
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """One figure of the paper beside the study's distribution of the same quantity."""
-
-    label: str  # e.g. "Fig. 4 completion time, high grip"
-    scenario: str  # rows' "scenario"
-    run: str | None  # rows' "label" (None: all runs of the scenario)
-    metric: str  # a row column, e.g. "m.completion_time_s"
-    paper: float | None  # the paper's value (None: no value given)
-    unit: str = ""
-
-
-@dataclass(frozen=True)
-class ReportSpec:
-    """What the report shows: the parameters to split by, the metrics, the trade-off and the comparisons."""
-
-    title: str
-    params: tuple[str, ...]  # row columns "p.<key>" to split distributions by
-    metrics: tuple[str, ...]  # columns "m.<name>" whose distributions to show
-    pareto: tuple[str, str] | None = ("m.completion_time_s", "m.rcm_error_max_mm")  # (x, y), both minimised
-    compare: tuple[Comparison, ...] = ()
 
 
 def pareto_front(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -41,8 +41,31 @@ import numpy as np
 from lapwrench import config as config_mod
 from lapwrench.config_yaml import YamlConfigError, cut, parse, read_text, short
 from lapwrench.sim.scenarios import SCENARIOS
-from lapwrench.study.report import Comparison, ReportSpec
 from lapwrench.study.space import Dist, SpaceError, apply, check_key, is_number, parse_dist
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One figure of the paper beside the study's distribution of the same quantity."""
+
+    label: str  # e.g. "Fig. 4 completion time, high grip"
+    scenario: str  # rows' "scenario"
+    run: str | None  # rows' "label" (None: all runs of the scenario)
+    metric: str  # a row column, e.g. "m.completion_time_s"
+    paper: float | None  # the paper's value (None: no value given)
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class ReportSpec:
+    """What the report shows: the parameters to split by, the metrics, the trade-off and the comparisons."""
+
+    title: str
+    params: tuple[str, ...]  # row columns "p.<key>" to split distributions by
+    metrics: tuple[str, ...]  # columns "m.<name>" whose distributions to show
+    pareto: tuple[str, str] | None = ("m.completion_time_s", "m.rcm_error_max_mm")  # (x, y), both minimised
+    compare: tuple[Comparison, ...] = ()
+
 
 MAX_SEED = 2**32 - 1
 MAX_JOBS = 100_000  # a study bigger than this is almost surely a typo in a grid
