@@ -138,13 +138,14 @@ def run_virtual(
         return InstrumentObservation(pixels[0], t)
 
     grip_mass, grip_com = float(cfg.scope.grip_mass), np.array(cfg.scope.grip_com, dtype=float)
-    R_H0 = ctrl.model.kinematics(robot.q, robot.dq).R_H  # where the sensor is tared, the handle untouched
+    # {H} is parallel to {E}: its rotation is {E}'s placement (one forward kinematics pass, a view to copy)
+    R_H0 = ctrl.model.placement_E_into(robot.q)[0].copy()  # where the sensor is tared, the handle untouched
 
     def read_ft(t: float) -> ForceTorqueReading:
         """The hand's wrench plus what the grip's weight adds since the tare, as a real sensor reads it."""
         force, torque = hand.force(t), hand.torque(t)
         if grip_mass > 0.0:
-            dF, dT = grip_weight_change(ctrl.model.kinematics(robot.q, robot.dq).R_H, R_H0, grip_mass, grip_com)
+            dF, dT = grip_weight_change(ctrl.model.placement_E_into(robot.q)[0], R_H0, grip_mass, grip_com)
             force, torque = force + dF, torque + dT
         return ForceTorqueReading(force, torque, t)
 

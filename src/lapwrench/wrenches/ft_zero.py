@@ -24,6 +24,7 @@ import math
 from lapwrench.jit import kernel
 from lapwrench.spatial import Mat, Vec
 from lapwrench.wrenches.grip_weight import without_grip_weight
+from lapwrench.wrenches.interaction import contact_count
 
 BAND_FORCE = 1.0  # N: a reading further than this from the zero is not bias (a push the tactile array missed)
 BAND_TORQUE = 0.05  # N m: the same for the torque (1 N at a 5 cm lever)
@@ -35,12 +36,7 @@ MAX_TORQUE = 0.15  # N m
 def untouched(tactile: Vec, has_tactile: bool, contact_threshold: float) -> bool:
     """Nobody touches the grip: a tactile reading with every element at or below the contact threshold (the
     paper's no-contact value is 0). Without a tactile reading nobody can tell: False."""
-    if not has_tactile:
-        return False
-    for x in tactile:  # noqa: SIM110 (a loop, for numba)
-        if x > contact_threshold:
-            return False
-    return True
+    return has_tactile and contact_count(tactile, contact_threshold) == 0
 
 
 @kernel

@@ -16,15 +16,19 @@ def surgeon_wrench(force_H: Vec, torque_H: Vec, R_H: Mat) -> tuple[Vec, Vec]:
 
 
 @kernel
-def grip_gain(values: Vec, k_H: float, k_min: int, contact_threshold: float = 0.0) -> tuple[float, int]:
-    """Eq (7): δ = Σ Se_j / k_H if n_c > k_min else 0; returns (δ, n_c).
-
-    An element counts as contacted when its value exceeds ``contact_threshold`` (the paper's
-    nominal no-contact value is 0).
-    """
+def contact_count(values: Vec, contact_threshold: float = 0.0) -> int:
+    """n_c of eq (7): the elements contacted, those whose value exceeds ``contact_threshold`` (the
+    paper's nominal no-contact value is 0)."""
     n_c = 0
     for x in values:
         n_c += x > contact_threshold
+    return n_c
+
+
+@kernel
+def grip_gain(values: Vec, k_H: float, k_min: int, contact_threshold: float = 0.0) -> tuple[float, int]:
+    """Eq (7): δ = Σ Se_j / k_H if n_c > k_min else 0; returns (δ, n_c), n_c by :func:`contact_count`."""
+    n_c = contact_count(values, contact_threshold)
     if n_c <= k_min:
         return 0.0, n_c
     return np.sum(values) / k_H, n_c
