@@ -311,3 +311,21 @@ def test_demo_foxglove_streams_the_cue_telemetry_of_its_configs_and_of_every_cue
                          "track.yaml", "--detector", "projected", "--foxglove", "127.0.0.1:0", "--out", "out"], capsys)
     assert code == 0, err
     assert seen[:2] == ["near", "far"] and {"keep_out", "zoom"} <= set(seen)
+
+
+@pytest.mark.parametrize("command", [["log-report", "run.mcap"], ["identify-grip", "run.mcap"]])
+def test_ctrl_c_in_a_command_is_one_line_and_exit_130(
+    command: list[str], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Commands without their own Ctrl-C handling (reading a long log) end with one line, not a traceback."""
+    from lapwrench.hardware import cli as hardware_cli
+    from lapwrench.hardware import grip_identify
+
+    def interrupted(*_args: object, **_kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(hardware_cli, "log_report_main", interrupted)
+    monkeypatch.setattr(grip_identify, "identify", interrupted)
+    assert main(command) == 130
+    err = capsys.readouterr().err
+    assert err == f"lapwrench {command[0]}: interrupted\n"

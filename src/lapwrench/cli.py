@@ -274,7 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse and run one command. Bad arguments and input files end with one line on stderr and exit
-    code 2 (argparse's own errors add a usage line); never a traceback."""
+    code 2 (argparse's own errors add a usage line), Ctrl-C with one line and 130; never a traceback."""
     # OpenCV's own warnings (a camera index that does not open...) would add lines to our one-line errors
     os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
     args = build_parser().parse_args(argv)
@@ -287,6 +287,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, config_mod.ConfigError) as exc:
         print(f"lapwrench {args.command}: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C in a command without its own handling (log-report, identify-grip...)
+        print(f"lapwrench {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
