@@ -22,6 +22,7 @@ from lapwrench.rcm import geometry as rg
 from lapwrench.rcm.adaptive import AdaptiveState, adaptive_rcm_step, residual_force
 from lapwrench.robot.model import Kinematics, ScopeAxis, assemble_kinematics, inverse_inertia
 from lapwrench.virtual import home_pose
+from lapwrench.wrenches.ft_zero import FtTare, conditioned_ft
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
 from lapwrench.wrenches.rcm import rcm_force
 from lapwrench.wrenches.tracking import virtual_force
@@ -95,9 +96,9 @@ def front(ctrl: Controller, rng: np.random.Generator, *, has_ft: bool = True, ha
     offsets = rng.normal(0.0, 1e-3, 4)
     before, off_before = copied(state), offsets.copy()
     ext, force = rng.uniform(-10.0, 10.0, 3), rng.uniform(-10.0, 10.0, 3)
-    out = tc.tick_front(terms, state, ctrl.rcm.params, ext, has_ext, offsets, R_m, p_m, True, force, has_ft,
-                        ctrl.params)
-    return Front(*out, before, off_before, assemble_kinematics(*terms))
+    out = tc.tick_front(terms, state, ctrl.rcm.params, ext, has_ext, offsets, R_m, p_m, True, force, np.zeros(3),
+                        has_ft, np.zeros(64), False, FtTare.at(np.eye(3)), ctrl.params)
+    return Front(*out[:5], before, off_before, assemble_kinematics(*terms))
 
 
 def motion(ctrl: Controller, f: Front, r: Readings, *, stopping: bool = False, extra: bool = False,
@@ -375,21 +376,56 @@ def test_tick_stage_is_tick_front_then_motion_tail(ctrl: Controller) -> None:
         q, dq = ctrl.ref.q + rng.uniform(-0.1, 0.1, n), rng.uniform(-0.3, 0.3, n)
         r, ext, offsets = readings(rng), rng.uniform(-5.0, 5.0, 3), np.r_[rng.normal(0.0, 1e-3, 3), 0.0]
         state_a, state_b, off_a, off_b = copied(ctrl.rcm.state), copied(ctrl.rcm.state), offsets.copy(), offsets.copy()
+        tare_a = FtTare(ctrl.model.kinematics(ctrl.ref.q, np.zeros(n)).R_H, rng.normal(0.0, 0.1, 6))
+        tare_b = FtTare(tare_a.R_H0, tare_a.zero.copy())
         R_m, p_m, _ = ctrl.feedback.measured_placement(q)
         got = tc.tick_stage(ctrl.model.terms(q, dq), state_a, ctrl.rcm.params, ext, True, off_a, R_m, p_m, True,
                             r.ft_force, r.ft_torque, True, r.tactile, True, r.points, np.zeros(n), False, R_E0(ctrl),
-                            True, tc.SaturationInputs.allocate(n), p)
+                            True, tc.SaturationInputs.allocate(n), tare_a, p)
         R_m, p_m, _ = ctrl.feedback.measured_placement(q)
-        kin, geo, F_lat, residual, has_residual = tc.tick_front(ctrl.model.terms(q, dq), state_b, ctrl.rcm.params, ext,
-                                                                True, off_b, R_m.copy(), p_m.copy(), True, r.ft_force,
-                                                                True, p)
-        want_tail = tc.motion_tail(kin, geo, *r, *NO_EXTRA, np.zeros(n), False, R_E0(ctrl), off_b[3], True,
-                                   tc.SaturationInputs.allocate(n), p)
+        kin, geo, F_lat, residual, has_residual, force, torque = tc.tick_front(
+            ctrl.model.terms(q, dq), state_b, ctrl.rcm.params, ext, True, off_b, R_m.copy(), p_m.copy(), True,
+            r.ft_force, r.ft_torque, True, r.tactile, True, tare_b, p)
+        want_tail = tc.motion_tail(kin, geo, force, torque, *r[2:], *NO_EXTRA, np.zeros(n), False, R_E0(ctrl),
+                                   off_b[3], True, tc.SaturationInputs.allocate(n), p)
         close(got[0], np.array([geo.e_R, geo.p_R, geo.p_G, F_lat, residual]), "vec3 rows")
         assert got[1] == has_residual is True
-        close(residual, residual_force(kin.R_H @ r.ft_force, ext), "ΔF = R_H F_s - F_ext (eq 19)")
+        close(residual, residual_force(kin.R_H @ force, ext), "ΔF = R_H F_s - F_ext (eq 19), of the hand's force")
         for i, (a, b) in enumerate(zip(got[2:], want_tail, strict=True)):
             close(a, b, f"output {i}")
         for name, a, b in zip(AdaptiveState._fields, state_a, state_b, strict=True):
             close(a, b, f"state {name}")
         close(off_a, off_b, "offsets")
+        close(tare_a.zero, tare_b.zero, "the F/T's zero")
+
+
+@pytest.mark.parametrize("measured", [True, False], ids=["measured", "reference"])
+@pytest.mark.parametrize("touched", [True, False], ids=["gripped", "untouched"])
+def test_tick_front_conditions_the_ft_reading_at_the_measured_rotation(
+    ctrl: Controller, measured: bool, touched: bool
+) -> None:
+    """The hand's wrench is :func:`conditioned_ft` of the reading: the grip's weight at {E}'s measured rotation
+    ({H} is parallel to {E}; the reference's without a measurement), the zero stepped in place only when
+    nobody touches the grip; ΔF (eq 19) is taken of it."""
+    assert ctrl.rcm is not None and ctrl.ref is not None
+    rng, p, n = np.random.default_rng(41), ctrl.params, ctrl.ref.q.shape[0]
+    assert p.grip_mass > 0.0 and p.zero_gain > 0.0  # the defaults: both on
+    q, dq = ctrl.ref.q + rng.uniform(-0.2, 0.2, n), np.zeros(n)
+    R_m, p_m = (a.copy() for a in ctrl.model.placement_E_into(q + rng.normal(0.0, 0.05, n)))
+    tactile = np.full(64, 60.0 if touched else 0.0)
+    force, torque, ext = np.array([0.3, -0.2, 0.5]), np.array([0.01, 0.0, -0.02]), rng.uniform(-5.0, 5.0, 3)
+    tare = FtTare.at(ctrl.model.kinematics(ctrl.ref.q, np.zeros(n)).R_H)
+    tare.zero[:] = [0.1, 0.0, -0.1, 0.0, 0.01, 0.0]
+    zero_before = tare.zero.copy()
+    out = tc.tick_front(ctrl.model.terms(q, dq), copied(ctrl.rcm.state), ctrl.rcm.params, ext, True,
+                        np.zeros(4), R_m, p_m, measured, force, torque, True, tactile, True, tare, p)
+    kin, got_force, got_torque = out[0], out[5], out[6]
+    R_H = R_m if measured else kin.R_H
+    want_zero = zero_before.copy()
+    want = conditioned_ft(force, torque, R_H, tare.R_H0, p.grip_mass, p.grip_com, want_zero, p.zero_gain, tactile,
+                          True, p.contact_threshold)
+    close(np.r_[got_force, got_torque], np.r_[want[0], want[1]], "the hand's wrench")
+    close(tare.zero, want_zero, "the zero, stepped alike")
+    assert np.any(tare.zero != zero_before) is not touched  # stepped while untouched only
+    assert np.linalg.norm(got_force - force) > 1e-3  # the weight change at a turned wrist is not nothing
+    close(out[3], residual_force(kin.R_H @ got_force, ext), "ΔF of the hand's force")

@@ -12,6 +12,7 @@ from lapwrench.rcm.adaptive import AdaptiveState
 from lapwrench.tick_core import SaturationInputs, motion_tail, tick_front
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.virtual import home_pose
+from lapwrench.wrenches.ft_zero import FtTare
 
 
 def test_the_views_are_disjoint_and_fill_the_buffer() -> None:
@@ -49,16 +50,19 @@ def _copies(state: AdaptiveState, offsets: np.ndarray) -> tuple[AdaptiveState, n
 def test_front_into_writes_what_tick_front_gives(has_ext: bool) -> None:
     ctrl, terms, R_m, p_m = _state()
     assert ctrl.rcm is not None
-    force, ext = np.array([2.0, -1.0, 4.0]), np.array([7.0, 0.5, -0.2])
+    force, ext = np.array([0.2, -0.1, 0.4]), np.array([7.0, 0.5, -0.2])  # a force inside the zero's band
     offsets = np.array([0.001, -0.002, 0.0, 0.003])
     rcm_a, off_a = _copies(ctrl.rcm.state, offsets)
     rcm_b, off_b = _copies(ctrl.rcm.state, offsets)
     args = (ctrl.rcm.params, ext, has_ext)
-    tail = (R_m, p_m, True, force, True, ctrl.params)
-    kin, geo, F_lat, residual, has_residual = tick_front(terms, rcm_a, *args, off_a, *tail)
+    torque, tactile = np.array([0.01, 0.0, -0.02]), np.zeros(64)
+    tare_a, tare_b = FtTare.at(R_m), FtTare.at(R_m)
+    reading = (R_m, p_m, True, force, torque, True, tactile, True)
+    kin, geo, F_lat, residual, has_residual, hand_F, hand_T = tick_front(terms, rcm_a, *args, off_a, *reading, tare_a,
+                                                                         ctrl.params)
     n = terms.q.shape[0]
     buf = np.full(front_size(n), np.nan)
-    vec3, s_star, has = front_into(terms, rcm_b, *args, off_b, *tail, buf)
+    vec3, s_star, has = front_into(terms, rcm_b, *args, off_b, *reading, tare_b, ctrl.params, buf)
     assert has == has_residual == has_ext
     assert s_star == geo.s_star
     k, g = front_views(buf, n, s_star)
@@ -66,7 +70,9 @@ def test_front_into_writes_what_tick_front_gives(has_ext: bool) -> None:
         np.testing.assert_array_equal(b, a, err_msg=name)
     for name, a, b in zip(geo._fields, geo, g, strict=True):
         np.testing.assert_array_equal(b, a, err_msg=name)
-    np.testing.assert_array_equal(vec3, np.array([geo.e_R, geo.p_R, geo.p_G, F_lat, residual]))
+    np.testing.assert_array_equal(vec3, np.array([geo.e_R, geo.p_R, geo.p_G, F_lat, residual, hand_F, hand_T]))
+    np.testing.assert_array_equal(tare_b.zero, tare_a.zero)  # stepped alike (untouched: it moves)
+    assert np.any(tare_a.zero != 0.0)
     assert has_ext == bool(np.any(vec3[4] != 0.0))
     for name, a, b in zip(rcm_a._fields, rcm_a, rcm_b, strict=True):  # the state stepped alike
         np.testing.assert_array_equal(b, a, err_msg=name)
@@ -82,7 +88,8 @@ def test_motion_tail_from_reads_back_what_front_into_wrote() -> None:
     buf = np.zeros(front_size(n))
     rcm, offsets = _copies(ctrl.rcm.state, np.zeros(4))
     _, s_star, _ = front_into(terms, rcm, ctrl.rcm.params, np.zeros(3), False, offsets, R_m, p_m, True,
-                              np.array([1.0, 2.0, 3.0]), True, ctrl.params, buf)
+                              np.array([1.0, 2.0, 3.0]), np.zeros(3), True, np.zeros(64), True, FtTare.at(R_m),
+                              ctrl.params, buf)
     kin, geo = front_views(buf, n, s_star)
     sensors = (np.array([1.0, 2.0, 3.0]), np.array([0.1, 0.0, -0.1]), True, np.full(64, 62.5), True,
                np.array([[480.0, 300.0], [150.0, 200.0]]))

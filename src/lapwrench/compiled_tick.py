@@ -8,7 +8,8 @@ placement of {E} come in its own layouts (:meth:`~lapwrench.robot.model.RobotMod
 
 When every configured cue is one of the paper's (fused into the compiled maths) the tick is one
 call (:func:`~lapwrench.tick_core.tick_stage`). With cues that run in Python (plugins) it is two,
-:func:`~lapwrench.tick_entry.front_into` (the kinematics, the measured axis, ΔF and the geometry)
+:func:`~lapwrench.tick_entry.front_into` (the kinematics, the hand's wrench, the measured axis, ΔF and
+the geometry)
 and :func:`~lapwrench.tick_entry.motion_tail_from`, with those cues evaluated in between on the
 tick's kinematics and geometry: views of one buffer bound here, which both calls share (valid for
 the tick). Both give a :class:`StageResult`.
@@ -33,7 +34,7 @@ from lapwrench.tick_core import SaturationInputs, tick_stage
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue, TickContext
-from lapwrench.wrenches.ft_zero import conditioned_ft
+from lapwrench.wrenches.ft_zero import FtTare
 
 
 class StageResult(NamedTuple):
@@ -96,37 +97,18 @@ def _reading_args(inputs: ValidInputs) -> tuple[object, ...]:
     )
 
 
-class FtConditioning(NamedTuple):
-    """What is taken off the handle F/T reading before any cue reads it: the grip's weight
-    (:mod:`lapwrench.wrenches.grip_weight`: ``grip_mass`` kg, 0 for none, at ``grip_com`` m in {H}; R_H0
-    the rotation of {H} in {B} where the F/T was tared) and the zero kept while nobody touches the grip
-    (:mod:`lapwrench.wrenches.ft_zero`, time constant ``zero_time`` s, 0 for off)."""
-
-    grip_mass: float
-    grip_com: Vec
-    R_H0: Mat
-    zero_time: float = 0.0
-
-    @property
-    def active(self) -> bool:
-        return self.grip_mass > 0.0 or self.zero_time > 0.0
-
-
 class CompiledTick:
     """The compiled stages bound to one controller's state and configuration."""
 
     def __init__(
-        self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue],
-        ft: FtConditioning | None = None,
+        self, params: TickParams, rcm: AdaptiveRcm, feedback: MeasuredFeedback, cues: Sequence[Cue], tare: FtTare,
     ) -> None:
-        """``cues``: the cues that run in Python (not fused into the compiled maths), in order; ``ft``: what
-        to take off the F/T reading (None, or nothing active: the reading as it is)."""
+        """``cues``: the cues that run in Python (not fused into the compiled maths), in order; ``tare``: where
+        the handle F/T was tared, and its zero (stepped by the compiled tick)."""
         self.params = params
         self.rcm = rcm
         self.feedback = feedback
-        self.ft = ft if ft is not None and ft.active else None
-        self.ft_zero = np.zeros(6)  # the F/T's zero [force; torque] (lapwrench.wrenches.ft_zero), from the tare
-        self._zero_gain = 0.0 if ft is None or ft.zero_time <= 0.0 else min(1.0, params.dt / ft.zero_time)
+        self.tare = tare
         self.cues = list(cues)
         self.null_cues = [c for c in self.cues if c.priority == "null"]
         self.task_cues = [c for c in self.cues if c.priority == "task"]
@@ -141,39 +123,28 @@ class CompiledTick:
         robot = inputs.robot
         return self.feedback.measured_placement(None if robot is None else robot.q)
 
-    def _condition_ft(self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]) -> None:
-        """``inputs.ft`` as the hand's wrench (:class:`FtConditioning`; in place): the grip's weight at {H}'s
-        measured rotation ({H} is parallel to {E}; the reference's without a measurement), and the zero."""
-        ft, c = inputs.ft, self.ft
-        if ft is None or c is None:
-            return
-        R_H = placement[0] if placement[2] else terms.R_H
-        tactile = inputs.tactile
-        force, torque = self._conditioned(
-            ft.force, ft.torque, R_H, c.R_H0, c.grip_mass, c.grip_com, self.ft_zero, self._zero_gain,
-            _NO_TACTILE if tactile is None else tactile.values, tactile is not None, self.params.contact_threshold,
-        )
-        inputs.ft = ForceTorqueReading(force, torque, ft.stamp)
-
     def _front_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
     ) -> tuple[object, ...]:
-        robot, ft = inputs.robot, inputs.ft
+        robot = inputs.robot
         ext = None if robot is None else robot.external_force
         R_m, p_m, has_measured = placement
         return (
             terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
-            self.feedback.offsets, R_m, p_m, has_measured, _ZERO3 if ft is None else ft.force, ft is not None,
-            self.params,
+            self.feedback.offsets, R_m, p_m, has_measured, *_reading_args(inputs)[:5], self.tare, self.params,
         )
 
     def _tick_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool], ddq_ref: Vec,
         stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
+        robot = inputs.robot
+        ext = None if robot is None else robot.external_force
+        R_m, p_m, has_measured = placement
         return (
-            *self._front_args(terms, inputs, placement)[:9], *_reading_args(inputs),
-            _f64(ddq_ref), bool(stopping), R_E0, bool(may_admit), self.sat, self.params,
+            terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
+            self.feedback.offsets, R_m, p_m, has_measured, *_reading_args(inputs), _f64(ddq_ref), bool(stopping), R_E0,
+            bool(may_admit), self.sat, self.tare, self.params,
         )
 
     def _motion_args(
@@ -193,16 +164,12 @@ class CompiledTick:
         live_rcm, live_offsets = self.rcm.state, self.feedback.offsets
         self.rcm.state = AdaptiveState(*(a.copy() for a in live_rcm))
         self.feedback.offsets = live_offsets.copy()
+        live_zero = self.tare
+        self.tare = FtTare(live_zero.R_H0, live_zero.zero.copy())
         try:
             none = ValidInputs()
             zero = np.zeros(terms.q.shape[0])
             at_rest = self._placement(none)
-            if self.ft is not None:
-                c, z3 = self.ft, np.zeros(3)
-                ft_args = (z3, z3, at_rest[0], c.R_H0, c.grip_mass, c.grip_com, np.zeros(6), self._zero_gain,
-                           _NO_TACTILE, False, self.params.contact_threshold)
-                self._conditioned = bind(conditioned_ft, *ft_args)
-                self._conditioned(*ft_args)
             args = self._tick_args(terms, none, at_rest, zero, False, R_E0, True)
             self._tick_stage = bind(tick_stage, *args)
             self._tick_stage(*args)
@@ -218,7 +185,7 @@ class CompiledTick:
             self._motion_tail_from = bind(motion_tail_from, *m_args)
             self._motion_tail_from(*m_args)
         finally:
-            self.rcm.state, self.feedback.offsets = live_rcm, live_offsets
+            self.rcm.state, self.feedback.offsets, self.tare = live_rcm, live_offsets, live_zero
 
     # -- one tick ------------------------------------------------------------------------------
     def run(
@@ -228,7 +195,6 @@ class CompiledTick:
         """The compiled maths of one tick (module docstring); when the result is not admitted, :attr:`sat`
         holds the saturation inputs."""
         placement = self._placement(inputs)
-        self._condition_ft(terms, inputs, placement)
         if self.cues:
             return self._run_with_cues(t, terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)
         args = self._tick_args(terms, inputs, placement, ddq_ref, stopping, R_E0, may_admit)
@@ -256,7 +222,9 @@ class CompiledTick:
         stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> StageResult:
         vec3, s_star, has_residual = self._front_into(*self._front_args(terms, inputs, placement), self._buf)
-        e_R, p_R, p_G, F_lat, residual = vec3  # row views of a new array: what outlives the tick
+        e_R, p_R, p_G, F_lat, residual, force, torque = vec3  # row views of a new array: what outlives the tick
+        if inputs.ft is not None:  # the cues and the motion stage read the hand's wrench (lapwrench.wrenches.ft_zero)
+            inputs.ft = ForceTorqueReading(force, torque, inputs.ft.stamp)
         geo = self._geo._replace(s_star=s_star)
         extra = self._evaluate_cues(TickContext(t, self._kin, geo, inputs))
         W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail_from(

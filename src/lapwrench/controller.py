@@ -12,7 +12,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from lapwrench.compiled_tick import CompiledTick, FtConditioning, StageResult
+from lapwrench.compiled_tick import CompiledTick, StageResult
 from lapwrench.config import Config
 from lapwrench.motion.envelope import WALL_NAMES, Envelope
 from lapwrench.motion.measured_feedback import MeasuredFeedback
@@ -34,6 +34,7 @@ from lapwrench.sensors import (
 from lapwrench.spatial import Vec
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.base import Cue
+from lapwrench.wrenches.ft_zero import FtTare
 from lapwrench.wrenches.registry import build_cues, input_specs
 
 MAX_KEPT_EVENTS = 10_000
@@ -47,7 +48,8 @@ _new_tuple = tuple.__new__  # builds a named tuple from its fields in order, wit
 
 
 def _norm(v: Vec) -> float:
-    return math.sqrt(v.dot(v))  # ndarray.dot: the same BLAS dot as ``v @ v``, with less call overhead
+    """|v| of a 3-vector: math.hypot of its floats, a third of ``sqrt(v @ v)``'s call overhead."""
+    return math.hypot(*v.tolist())
 
 
 def classify_mode(handle_engaged: bool, tracking_engaged: bool, handle_force: float, tracking_force: float) -> Mode:
@@ -194,11 +196,8 @@ class Controller:
         self.feedback.reset()
         # every runner tares the F/T with the handle untouched at the pose it first starts the controller
         # from; the grip's weight is taken off relative to {H} there (lapwrench.wrenches.grip_weight)
-        R_H0 = kin.R_H.copy() if R_H_tare is None else R_H_tare
-        sc = self.cfg.scope
-        ft = FtConditioning(float(sc.grip_mass), np.array(sc.grip_com, dtype=float), R_H0,
-                            float(self.cfg.interaction.auto_zero_time))
-        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues, ft)
+        tare = FtTare.at(kin.R_H if R_H_tare is None else R_H_tare)
+        self.compiled = CompiledTick(self.params, self.rcm, self.feedback, self.python_cues, tare)
         terms = self.model.terms(q0, rest)
         assert self.envelope.R_E0 is not None
         self.compiled.bind(terms, self.envelope.R_E0)

@@ -6,7 +6,8 @@ no cue runs in Python, :func:`tick_stage`):
 
 1. :func:`geometry_stage`: the adaptive RCM point (eq 19-26), the RCM error (eq 27), what the
    measured pose adds (:mod:`lapwrench.motion.measured_feedback`) and the task geometry (eq 28-36);
-   :func:`tick_front` adds the kinematics, the measured scope axis and ΔF (eq 19) before it;
+   :func:`tick_front` adds the kinematics, the hand's wrench from the F/T reading
+   (:mod:`lapwrench.wrenches.ft_zero`), the measured scope axis and ΔF (eq 19) before it;
 2. :func:`motion_stage`: the wrenches (eq 5-14, 40), the task/null-space allocation (eq 2-4, 37-39),
    the self-motion terms, the integration of the virtual model, the joint-limit box and the envelope rows.
 
@@ -71,6 +72,7 @@ from lapwrench.robot.model import (
 )
 from lapwrench.spatial import Mat, Vec, all_finite, matvec
 from lapwrench.tick_params import TickParams
+from lapwrench.wrenches.ft_zero import FtTare, conditioned_ft
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
 from lapwrench.wrenches.rcm import rcm_force
 from lapwrench.wrenches.tracking import virtual_force
@@ -340,19 +342,30 @@ def motion_tail(
 @kernel
 def tick_front(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
-    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, has_ft: bool, p: TickParams,
+    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
+    has_tactile: bool, tare: FtTare, p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
-    """The tick up to the cues: the kinematics from Pinocchio's terms, the scope axis at the measured joints
-    from {E}'s measured placement (``R_measured``, ``p_measured``), ΔF (eq 19; zero unless the F/T and the
-    robot's estimate are both valid) and :func:`geometry_stage`. Returns (kin, geo, F_re⊥, ΔF, has ΔF)."""
+    """The tick up to the cues: the kinematics from Pinocchio's terms; the hand's wrench from the F/T reading
+    (:func:`~lapwrench.wrenches.ft_zero.conditioned_ft`: the grip's weight at {H}'s measured rotation, {H}
+    being parallel to {E}, or the reference's without a measurement; the zero, ``tare.zero`` stepped in
+    place); the scope axis at the measured joints from {E}'s measured placement (``R_measured``,
+    ``p_measured``); ΔF (eq 19; zero unless the F/T and the robot's estimate are both valid) and
+    :func:`geometry_stage`. Returns (kin, geo, F_re⊥, ΔF, has ΔF, the hand's force, its torque)."""
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
+    force, torque = ft_force, ft_torque
+    if has_ft and has_measured:
+        force, torque = conditioned_ft(ft_force, ft_torque, R_measured, tare.R_H0, p.grip_mass, p.grip_com, tare.zero,
+                                       p.zero_gain, tactile, has_tactile, p.contact_threshold)
+    elif has_ft:
+        force, torque = conditioned_ft(ft_force, ft_torque, kin.R_H, tare.R_H0, p.grip_mass, p.grip_com, tare.zero,
+                                       p.zero_gain, tactile, has_tactile, p.contact_threshold)
     has_residual = has_ft and has_ext
-    residual = residual_force(matvec(kin.R_H, ft_force), ext_force) if has_residual else np.zeros(3)
+    residual = residual_force(matvec(kin.R_H, force), ext_force) if has_residual else np.zeros(3)
     d_z, P = scope_axis(R_measured)
     measured = ScopeAxis(p_measured, d_z, P)
     geo, F_lat = geometry_stage(kin, rcm, adaptive, residual, has_residual, offsets, measured, has_measured, p)
-    return kin, geo, F_lat, residual, has_residual
+    return kin, geo, F_lat, residual, has_residual, force, torque
 
 
 @kernel
@@ -360,18 +373,19 @@ def tick_stage(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
     R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
     has_tactile: bool, points: Mat, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool, sat: SaturationInputs,
-    p: TickParams,
+    tare: FtTare, p: TickParams,
 ) -> tuple:  # type: ignore[type-arg]
     """The whole compiled tick in one call, when every cue is compiled (no Python cues): :func:`tick_front`
-    and :func:`motion_tail`.
+    and :func:`motion_tail` (on the hand's wrench, the conditioned F/T reading).
 
     Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
     """
-    kin, geo, F_lat, residual, has_residual = tick_front(
-        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, has_ft, p,
+    kin, geo, F_lat, residual, has_residual, force, torque = tick_front(
+        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, ft_torque,
+        has_ft, tactile, has_tactile, tare, p,
     )
     W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
-        kin, geo, ft_force, ft_torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
+        kin, geo, force, torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
         np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,
     )
     vec3 = np.empty((5, 3))

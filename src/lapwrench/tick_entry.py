@@ -24,6 +24,7 @@ from lapwrench.robot.model import Kinematics, KinematicTerms
 from lapwrench.spatial import Mat, Vec
 from lapwrench.tick_core import SaturationInputs, motion_tail, tick_front
 from lapwrench.tick_params import TickParams
+from lapwrench.wrenches.ft_zero import FtTare
 
 
 @kernel
@@ -63,14 +64,17 @@ def front_views(buf: Vec, n: int, s_star: float) -> tuple[Kinematics, TaskGeomet
 @kernel
 def front_into(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
-    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, has_ft: bool, p: TickParams, buf: Vec,
+    R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
+    has_tactile: bool, tare: FtTare, p: TickParams, buf: Vec,
 ) -> tuple[Mat, float, bool]:
     """:func:`~lapwrench.tick_core.tick_front` written into ``buf`` (:func:`front_views`).
 
-    Returns new ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], s* and whether ΔF is valid (eq 19: the F/T and
-    the robot's estimate both)."""
-    k, g, F_lat, residual, has_residual = tick_front(
-        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, has_ft, p,
+    Returns new ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF, the hand's force, its torque] (the last two the
+    conditioned F/T reading the cues read), s* and whether ΔF is valid (eq 19: the F/T and the robot's
+    estimate both)."""
+    k, g, F_lat, residual, has_residual, force, torque = tick_front(
+        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, ft_torque,
+        has_ft, tactile, has_tactile, tare, p,
     )
     kin, geo = front_views(buf, k.q.shape[0], g.s_star)
     kin.q[:], kin.dq[:], kin.M[:], kin.nle[:], kin.gravity[:] = k.q, k.dq, k.M, k.nle, k.gravity
@@ -78,8 +82,10 @@ def front_into(
     kin.p_C[:], kin.R_C[:], kin.d_z[:], kin.P[:] = k.p_C, k.R_C, k.d_z, k.P
     geo.p_R[:], geo.rcm_velocity[:], geo.e_R[:], geo.e_R_rate[:] = g.p_R, g.rcm_velocity, g.e_R, g.e_R_rate
     geo.J_R[:], geo.p_G[:], geo.o_G[:], geo.J_G[:], geo.e_R_offset[:] = g.J_R, g.p_G, g.o_G, g.J_G, g.e_R_offset
-    vec3 = np.empty((5, 3))
-    vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = g.e_R, g.p_R, g.p_G, F_lat, residual
+    rows = (g.e_R, g.p_R, g.p_G, F_lat, residual, force, torque)
+    vec3 = np.empty((len(rows), 3))
+    for i, row in enumerate(rows):
+        vec3[i] = row
     return vec3, g.s_star, has_residual
 
 

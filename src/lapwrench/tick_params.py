@@ -13,6 +13,7 @@ from lapwrench.motion.envelope import EnvelopeParams
 from lapwrench.motion.measured_feedback import FEEDBACK_TIME
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Mat, Vec
+from lapwrench.wrenches.ft_zero import zero_gain
 from lapwrench.wrenches.tracking import TrackingParams
 
 
@@ -47,6 +48,9 @@ class TickParams(NamedTuple):
     cue_interaction: bool  # the paper's cues that run inside the compiled tick (the ``cues:`` section)
     cue_tracking: bool
     cue_viscous: bool
+    grip_mass: float  # kg beyond the F/T sensor, 0 for none (lapwrench.wrenches.grip_weight)
+    grip_com: Vec  # m, in {H}
+    zero_gain: float  # Δt / T of the F/T's zero while untouched, 0 for off (lapwrench.wrenches.ft_zero)
 
     @staticmethod
     def from_config(cfg: Config, limits: JointLimits) -> TickParams:
@@ -81,6 +85,9 @@ class TickParams(NamedTuple):
             cue_interaction=_fused(cfg, "interaction"),
             cue_tracking=_fused(cfg, "tracking"),
             cue_viscous=_fused(cfg, "viscous"),
+            grip_mass=float(cfg.scope.grip_mass),
+            grip_com=np.array(cfg.scope.grip_com, dtype=float),
+            zero_gain=zero_gain(float(cfg.robot.dt), float(cfg.interaction.auto_zero_time)),
         )
 
 

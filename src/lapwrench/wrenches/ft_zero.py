@@ -20,11 +20,31 @@ from ever moving the zero far from the tare. Gripped, b holds.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
+
+import numpy as np
 
 from lapwrench.jit import kernel
 from lapwrench.spatial import Mat, Vec
 from lapwrench.wrenches.grip_weight import without_grip_weight
 from lapwrench.wrenches.interaction import contact_count
+
+
+class FtTare(NamedTuple):
+    """Where the handle F/T was tared, and its zero since: the state :func:`conditioned_ft` reads and steps."""
+
+    R_H0: Mat  # {H}'s rotation in {B} where the F/T was tared untouched (lapwrench.wrenches.grip_weight)
+    zero: Vec  # the zero b = [b_F; b_τ] in {H} (module docstring), stepped in place; zero at the tare
+
+    @staticmethod
+    def at(R_H0: Mat) -> FtTare:
+        return FtTare(np.array(R_H0, dtype=np.float64, order="C"), np.zeros(6))  # its own copy
+
+
+def zero_gain(dt: float, zero_time: float) -> float:
+    """Δt / T of :func:`zero_step`, at most 1; 0 (the zero held) for ``zero_time`` 0."""
+    return 0.0 if zero_time <= 0.0 else min(1.0, dt / zero_time)
+
 
 BAND_FORCE = 1.0  # N: a reading further than this from the zero is not bias (a push the tactile array missed)
 BAND_TORQUE = 0.05  # N m: the same for the torque (1 N at a 5 cm lever)
