@@ -57,24 +57,26 @@ WATCHED_BODY = "lap_handle"  # the scope's handle: of the scope's bodies it move
 
 # Runs in the page before viser's scripts. From the push's keydown on it keeps the raw events, for
 # Python to read: the arrival of each message about the watched handle body or the force arrows, and the
-# start and end of each animation frame. Before the keydown it keeps where the page shows the handle.
+# start and end of each animation frame. Before the keydown it keeps where the page shows every body (the last
+# pose it was sent: a body at rest is not sent again, so this cannot wait for the watched one to move).
 PRELOAD = """
 (() => {
   const clock = () => performance.timeOrigin + performance.now();
-  const lw = window.__lw = {watch: null, key: null, p0: null, shown_p: null, msgs: [], frames: [], ts: []};
+  const lw = window.__lw = {watch: null, key: null, p0: null, last: {}, msgs: [], frames: [], ts: []};
   const W = window.Worker;
   window.Worker = class extends W {
     constructor(...args) {
       super(...args);
       this.addEventListener('message', (e) => {
-        const w = lw.watch, d = e.data;
-        if (!w || !d || d.type !== 'message_batch') return;
-        const t = clock();
+        const d = e.data;
+        if (!d || d.type !== 'message_batch') return;
+        const t = clock(), w = lw.watch;
         for (const m of d.messages) {
-          if (m.name === w.name && m.type === 'SetPositionMessage') {
-            if (lw.key === null) lw.shown_p = Array.from(m.position);
-            else lw.msgs.push([t, 'pose', Array.from(m.position)]);
-          } else if (m.name === w.arrows && lw.key !== null) lw.msgs.push([t, 'arrows', null]);
+          const pose = m.type === 'SetPositionMessage';
+          if (pose && (lw.key === null || !w || m.name !== w.name)) lw.last[m.name] = Array.from(m.position);
+          if (!w || lw.key === null) continue;
+          if (pose && m.name === w.name) lw.msgs.push([t, 'pose', Array.from(m.position)]);
+          else if (m.name === w.arrows) lw.msgs.push([t, 'arrows', null]);
         }
       });
     }
@@ -92,7 +94,10 @@ PRELOAD = """
     if (lw.key !== null && f.length) f[f.length - 1][1] = clock();  // the frame's last callback so far ended
   });
   document.addEventListener('keydown', (e) => {
-    if (lw.watch && lw.key === null && e.key === lw.watch.key) { lw.key = clock(); lw.p0 = lw.shown_p; }
+    if (lw.watch && lw.key === null && e.key === lw.watch.key) {
+      lw.key = clock();
+      lw.p0 = lw.last[lw.watch.name] || null;
+    }
   }, true);
 })();
 """
