@@ -162,6 +162,41 @@ def feeder_main(bus_name: str, bus_rows: tuple[int, int], period: float = 0.001)
         time.sleep(period)
 
 
+Pushes = tuple[tuple[float, float, tuple[float, float, float]], ...]  # (from s, until s, force N in {H})
+
+
+def pushed_force(pushes: Pushes, t: float) -> np.ndarray:
+    """The hand's force (N, in {H}) at time ``t`` of a schedule of constant pushes; zero between them."""
+    for start, end, force in pushes:
+        if start <= t < end:
+            return np.array(force, dtype=float)
+    return np.zeros(3)
+
+
+@dataclass
+class RobotTimeForce:
+    """:func:`pushed_force` at the loop's robot time (its cycle count on the real-time bus times ``dt``): the
+    force function of a :class:`~lapwrench.hardware.devices.SimulatedHexProcess`, so the box runs in a
+    process of its own (a real box is a device of its own, never waiting for this process's interpreter)
+    and its script still follows robot time. Picklable: it attaches to the bus in the box's process."""
+
+    bus_name: str
+    bus_rows: tuple[int, int]
+    dt: float
+    pushes: Pushes
+    _bus: Any = field(default=None, repr=False)  # kept: its memory is unmapped when it goes
+
+    def __call__(self, _wall_t: float) -> np.ndarray:
+        from lapwrench.hardware.rt import CTL_CYCLES
+
+        if self._bus is None:
+            from lapwrench.hardware.rt import bus_layout
+            from lapwrench.hardware.shm import Bus
+
+            self._bus = Bus.attach(self.bus_name, bus_layout(*self.bus_rows))
+        return pushed_force(self.pushes, float(self._bus["ctl"][CTL_CYCLES]) * self.dt)
+
+
 @dataclass
 class FixedDetection:
     u: float

@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hardware.support import MemoryLogger, QdProbe, rt_process, rt_spec
+from hardware.support import MemoryLogger, Pushes, QdProbe, RobotTimeForce, pushed_force, rt_process, rt_spec
 
 from lapwrench.buffer import LatestValue
-from lapwrench.drivers.simulated_hex import SimulatedHexBox
 from lapwrench.drivers.tactile import TactileFrame
-from lapwrench.hardware.rt import CTL_CYCLES, FtSpec, RtProcess, franka_factory
+from lapwrench.hardware.devices import SimulatedHexProcess
+from lapwrench.hardware.rt import FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import measure_scope
@@ -51,13 +51,12 @@ BOX_FIFO_PRIORITY = 70  # below the loop's own (RtOptions: 80)
 pytestmark = pytest.mark.slow  # franky-sim end to end
 
 
+PUSHES: Pushes = ((0.8, 2.8, (12.0, 0.0, 0.0)), (3.2, 4.8, (0.0, -10.0, 0.0)))  # lateral, pause, the other way
+
+
 def hand_force(t: float) -> np.ndarray:
-    """Handle force in {H}: lateral push, pause, push the other way."""
-    if 0.8 <= t < 2.8:
-        return np.array([12.0, 0.0, 0.0])
-    if 3.2 <= t < 4.8:
-        return np.array([0.0, -10.0, 0.0])
-    return np.zeros(3)
+    """Handle force in {H} at robot time ``t`` (:data:`PUSHES`)."""
+    return pushed_force(PUSHES, t)
 
 
 def axis_distance(model: RobotModel, q: np.ndarray, p_R: np.ndarray) -> float:
@@ -82,10 +81,6 @@ def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:
             franka_factory, robot_ip="127.0.0.1", kind="fr3", realtime="ignore", report_external_force=False
         )
         rp = rt_process(rt_spec(fr3_cfg, robot_factory=factory, loop_hook=QdProbe), tactile=tactile, logger=log)
-        cycles = rp.bus["ctl"]
-
-        def robot_time() -> float:
-            return float(cycles[CTL_CYCLES]) * dt
 
         def grip() -> None:
             while not stop.is_set():
@@ -93,15 +88,21 @@ def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:
                 stop.wait(0.005)
 
         threading.Thread(target=grip, daemon=True).start()
-        def counts(_i: int) -> np.ndarray:
-            return np.r_[hand_force(robot_time()) * 1e4, 0, 0, 0]
-
-        # the box's thread at SCHED_FIFO (when permitted): a real box has a CPU of its own, so the busy
-        # process must not delay its records (two runs beside CI and two busy processes saw 89 % fresh)
-        with SimulatedHexBox(rate_hz=1000.0, counts_fn=counts, fifo_priority=BOX_FIFO_PRIORITY) as box:
+        # the box in a process of its own, its thread at SCHED_FIFO (when permitted), as bench/loop.py runs
+        # it: a real box is a device with a CPU of its own, so neither the busy process nor this process's
+        # threads (the grip, the log reader: they share one interpreter) may delay its records (two runs
+        # beside CI and two busy processes saw 89 % fresh without the priority; 98.3-99.3 % with it, the
+        # box a thread of this process)
+        box = SimulatedHexProcess(
+            RobotTimeForce(rp.bus_name, (rp.spec.log_rows, rp.spec.event_rows), dt, PUSHES), rate_hz=1000.0,
+            fifo_priority=BOX_FIFO_PRIORITY,
+        ).start()
+        try:
             rp.spec.ft = FtSpec("hex", "127.0.0.1", box.port, tare=True, tare_samples=50)
             rp.start()
             res = rp.run(5.5)
+        finally:
+            box.close()
     finally:
         stop.set()
         busy.kill()
