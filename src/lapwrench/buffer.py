@@ -64,13 +64,14 @@ class LatestValue(Generic[T]):
     start-up and tests; never call it from the control loop.
     """
 
-    __slots__ = ("_cond", "_name", "_sample", "_seq")
+    __slots__ = ("_cond", "_name", "_sample", "_seq", "_waiting")
 
     def __init__(self, name: str = "", lock: threading.Lock | None = None) -> None:
         """``lock`` serialises the writers (a new one unless given; readers never take it)."""
         self._name = name
         self._sample: Sample[T] | None = None
         self._seq = 0
+        self._waiting = 0  # threads in wait_newer (under the lock): put notifies only when there are any
         self._cond = threading.Condition(threading.Lock() if lock is None else lock)
 
     @property
@@ -85,7 +86,8 @@ class LatestValue(Generic[T]):
             self._seq += 1
             sample = Sample(value, ts, self._seq)
             self._sample = sample  # single atomic reference swap; readers never lock
-            self._cond.notify_all()
+            if self._waiting:  # notify_all's own cost, every sample of a 1 kHz device, only when someone waits
+                self._cond.notify_all()
         return sample
 
     def get(self) -> Sample[T] | None:
@@ -126,12 +128,16 @@ class LatestValue(Generic[T]):
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._cond:
-            while self._sample is None or self._sample.seq <= seq:
-                remaining = None if deadline is None else deadline - time.monotonic()
-                if remaining is not None and remaining <= 0:
-                    return None
-                self._cond.wait(remaining)
-            return self._sample
+            self._waiting += 1
+            try:
+                while self._sample is None or self._sample.seq <= seq:
+                    remaining = None if deadline is None else deadline - time.monotonic()
+                    if remaining is not None and remaining <= 0:
+                        return None
+                    self._cond.wait(remaining)
+                return self._sample
+            finally:
+                self._waiting -= 1
 
     def __repr__(self) -> str:
         s = self._sample

@@ -11,7 +11,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from numpy.typing import NDArray
 
 from lapwrench.drivers.base import DeviceTimeoutError, PacketError
 from lapwrench.drivers.ft.stream import TareCollector, UdpRecordStream
@@ -87,7 +86,7 @@ class UdpForceTorqueSensor(UdpRecordStream):
         sock = self._sock
         if sock is None:
             return 0
-        newest: tuple[NDArray[np.float64], FTRecord] | None = None
+        newest: tuple[list[float], FTRecord] | None = None
         n = 0
         while n < max_datagrams:
             try:

@@ -107,8 +107,9 @@ class UdpRecordStream(StreamingSource[Wrench]):
         self.max_force = float(max_force)
         self.max_torque = float(max_torque)
         self._sock: socket.socket | None = None
-        self._scale_list = [1.0 / self.counts_per_force] * 3 + [1.0 / self.counts_per_torque] * 3  # N, N m per count
+        self._scale = [1.0 / self.counts_per_force] * 3 + [1.0 / self.counts_per_torque] * 3  # N, N m per count
         self._bias = np.zeros(6)
+        self._bias_values = [0.0] * 6  # the bias as floats (_set_bias keeps both)
         self._tare: TareCollector | None = None
         self._polled = False
         self.last_status = 0
@@ -228,9 +229,12 @@ class UdpRecordStream(StreamingSource[Wrench]):
         self._publish_raw(*accepted, now)
         return True
 
-    def _accept_datagram(self, data: bytes) -> tuple[NDArray[np.float64], FTRecord] | None:
+    def _accept_datagram(self, data: bytes) -> tuple[list[float], FTRecord] | None:
         """Decode and check one datagram (sequence, status, tare); the raw wrench (N, N·m, bias
         not removed, :data:`WIRE_ORDER`) and its record, or ``None`` for a duplicate/out-of-order record.
+
+        The six numbers stay Python floats until :meth:`_publish_raw` makes the newest one an array: the
+        polled loop decodes a record every cycle, and numpy's per-call overhead dwarfs six products.
 
         Raises:
             PacketError: malformed datagram or (:class:`StatusError`) a device status error.
@@ -240,9 +244,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
         if rec.status & self.status_error_mask:
             self.last_status = rec.status
             raise StatusError(f"device status 0x{rec.status:08x}")
-        # six numbers: Python floats, then one array (numpy's per-call overhead dwarfs the arithmetic; the
-        # polled loop decodes a record every cycle)
-        c, k = rec.counts, self._scale_list
+        c, k = rec.counts, self._scale
         v = [c[0] * k[0], c[1] * k[1], c[2] * k[2], c[3] * k[3], c[4] * k[4], c[5] * k[5]]
         f, m = math.hypot(v[0], v[1], v[2]), math.hypot(v[3], v[4], v[5])
         if not (f <= self.max_force and m <= self.max_torque):
@@ -250,15 +252,15 @@ class UdpRecordStream(StreamingSource[Wrench]):
         if not self.rate.check_seq(rec.sequence):
             return None  # duplicate / out-of-order / an unconfirmed far jump, counted by the rate monitor
         tare = self._tare
-        raw = np.array(v)
         if tare is not None and not tare.done.is_set():
-            tare.samples.append(raw)
+            tare.samples.append(np.array(v))
             if len(tare.samples) >= tare.n:
                 tare.done.set()
-        return raw, rec
+        return v, rec
 
-    def _publish_raw(self, raw: NDArray[np.float64], rec: FTRecord, now: float) -> None:
-        w = raw - self._bias
+    def _publish_raw(self, raw: list[float], rec: FTRecord, now: float) -> None:
+        b = self._bias_values
+        w = np.array([raw[0] - b[0], raw[1] - b[1], raw[2] - b[2], raw[3] - b[3], raw[4] - b[4], raw[5] - b[5]])
         w.flags.writeable = False
         self._publish(Wrench(w[:3], w[3:], rec.ft_sequence, rec.status), now)
 
@@ -284,7 +286,8 @@ class UdpRecordStream(StreamingSource[Wrench]):
         """Set the software bias from a (6,) array in :data:`WIRE_ORDER`."""
         if not np.all(np.isfinite(bias)):
             raise ValueError("bias must be finite")
-        self._bias = bias  # atomic reference swap, read by the reader thread
+        self._bias = bias
+        self._bias_values = bias.tolist()  # atomic reference swap, what the reader thread reads
 
     def clear_bias(self) -> None:
         """Remove the software bias."""
