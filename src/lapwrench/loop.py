@@ -42,7 +42,7 @@ from lapwrench.controller import Controller, TickResult
 from lapwrench.loop_stats import Cycle, Growable, LoopStats
 from lapwrench.robot.errors import RobotError
 from lapwrench.robot_interface import RobotInterface
-from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent, measure_scope
+from lapwrench.safety.supervisor import SafetySupervisor, SupervisorEvent, SupervisorState, measure_scope
 from lapwrench.sensors import RobotReading, SensorFrame
 from lapwrench.sources import Source, fresh
 from lapwrench.spatial import Vec
@@ -309,9 +309,9 @@ class ControlLoop:
                 if stop_deadline is None and (
                     (duration is not None and robot_t >= duration - 1e-9)
                     or (stop_event is not None and stop_event.is_set())
-                    or sup.state.value != "running"
+                    or sup.state is not SupervisorState.RUNNING  # an identity test: Enum's .value is a slow property
                 ):
-                    sup.stop(self.session_time(), "end of run" if sup.state.value == "running" else "alarm")
+                    sup.stop(self.session_time(), "end of run" if sup.state is SupervisorState.RUNNING else "alarm")
                     stop_deadline = robot_t + self.stop_timeout
                 if stop_deadline is not None and robot_t > stop_deadline:
                     sup.event(self.session_time(), "stop_timeout", "the stop did not reach rest in time")
