@@ -73,7 +73,7 @@ PRELOAD = """
         const t = clock(), w = lw.watch;
         for (const m of d.messages) {
           const pose = m.type === 'SetPositionMessage';
-          if (pose && (lw.key === null || !w || m.name !== w.name)) lw.last[m.name] = Array.from(m.position);
+          if (pose) lw.last[m.name] = Array.from(m.position);  // p0 is taken from here at the keydown
           if (!w || lw.key === null) continue;
           if (pose && m.name === w.name) lw.msgs.push([t, 'pose', Array.from(m.position)]);
           else if (m.name === w.arrows) lw.msgs.push([t, 'arrows', null]);
