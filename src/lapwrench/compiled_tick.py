@@ -123,27 +123,30 @@ class CompiledTick:
         robot = inputs.robot
         return self.feedback.measured_placement(None if robot is None else robot.q)
 
-    def _front_args(
+    def _state_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
     ) -> tuple[object, ...]:
+        """The arguments both entry stages begin with: the terms, the adaptive RCM state and parameters, the
+        robot's force estimate, the measured-feedback offsets and {E}'s measured placement."""
         robot = inputs.robot
         ext = None if robot is None else robot.external_force
         R_m, p_m, has_measured = placement
         return (
             terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
-            self.feedback.offsets, R_m, p_m, has_measured, *_reading_args(inputs)[:5], self.tare, self.params,
+            self.feedback.offsets, R_m, p_m, has_measured,
         )
+
+    def _front_args(
+        self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
+    ) -> tuple[object, ...]:
+        return (*self._state_args(terms, inputs, placement), *_reading_args(inputs)[:5], self.tare, self.params)
 
     def _tick_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool], ddq_ref: Vec,
         stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> tuple[object, ...]:
-        robot = inputs.robot
-        ext = None if robot is None else robot.external_force
-        R_m, p_m, has_measured = placement
         return (
-            terms, self.rcm.state, self.rcm.params, _ZERO3 if ext is None else ext, ext is not None,
-            self.feedback.offsets, R_m, p_m, has_measured, *_reading_args(inputs), _f64(ddq_ref), bool(stopping), R_E0,
+            *self._state_args(terms, inputs, placement), *_reading_args(inputs), _f64(ddq_ref), bool(stopping), R_E0,
             bool(may_admit), self.sat, self.tare, self.params,
         )
 
