@@ -109,6 +109,37 @@ def test_wait_newer_returns_and_times_out() -> None:
     assert buf.wait_newer(s.seq, timeout=0.01) is None
 
 
+def test_a_waiter_that_timed_out_leaves_the_others_woken_by_put() -> None:
+    """put notifies only while someone waits (a count kept under the lock): a waiter that gave up must not
+    leave the count wrong for one still waiting, nor the count stay up once all have returned. A waiter
+    not notified would sleep its whole 60 s timeout; woken, it returns at once (10 s of margin)."""
+    buf: LatestValue[int] = LatestValue()
+
+    def waiter(after: int, out: list[object]) -> threading.Thread:
+        t = threading.Thread(target=lambda: out.append(buf.wait_newer(after, timeout=60.0)), daemon=True)
+        t.start()
+        return t
+
+    got: list[object] = []
+    patient = waiter(0, got)
+    assert buf.wait_newer(0, timeout=0.01) is None  # this one gives up while the other still waits
+    buf.put(7)
+    patient.join(10.0)
+    assert not patient.is_alive(), "the waiter was not woken by put"
+    assert getattr(got[0], "value", None) == 7
+    for _ in range(3):  # no one waits now: puts go on without notifying
+        buf.put(8)
+    late: list[object] = []
+    seq = buf.get().seq  # type: ignore[union-attr]
+    t = waiter(seq, late)
+    while t.is_alive() and not late:
+        buf.put(9)  # until the new waiter has seen one: it may start waiting after any of these
+        t.join(0.01)
+    t.join(10.0)
+    assert not t.is_alive(), "a later waiter was not woken by put"
+    assert getattr(late[0], "value", None) == 9
+
+
 def test_rate_monitor_estimates_rate_and_decays() -> None:
     rm = RateMonitor(window_s=1.0)
     for i in range(201):
