@@ -354,11 +354,9 @@ def tick_front(
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
                               terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
     force, torque = ft_force, ft_torque
-    if has_ft and has_measured:
-        force, torque = conditioned_ft(ft_force, ft_torque, R_measured, tare.R_H0, p.grip_mass, p.grip_com, tare.zero,
-                                       p.zero_gain, tactile, has_tactile, p.contact_threshold)
-    elif has_ft:
-        force, torque = conditioned_ft(ft_force, ft_torque, kin.R_H, tare.R_H0, p.grip_mass, p.grip_com, tare.zero,
+    if has_ft:
+        R_H = R_measured if has_measured else terms.R_H  # both Pinocchio's (column-major) rotations
+        force, torque = conditioned_ft(ft_force, ft_torque, R_H, tare.R_H0, p.grip_mass, p.grip_com, tare.zero,
                                        p.zero_gain, tactile, has_tactile, p.contact_threshold)
     has_residual = has_ft and has_ext
     residual = residual_force(matvec(kin.R_H, force), ext_force) if has_residual else np.zeros(3)
