@@ -108,8 +108,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
         self.max_torque = float(max_torque)
         self._sock: socket.socket | None = None
         self._scale = [1.0 / self.counts_per_force] * 3 + [1.0 / self.counts_per_torque] * 3  # N, N m per count
-        self._bias = np.zeros(6)
-        self._bias_values = [0.0] * 6  # the bias as floats (_set_bias keeps both)
+        self._bias = [0.0] * 6  # N, N m (WIRE_ORDER), as floats: subtracted from every record's six floats
         self._tare: TareCollector | None = None
         self._polled = False
         self.last_status = 0
@@ -259,7 +258,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
         return v, rec
 
     def _publish_raw(self, raw: list[float], rec: FTRecord, now: float) -> None:
-        b = self._bias_values
+        b = self._bias
         w = np.array([raw[0] - b[0], raw[1] - b[1], raw[2] - b[2], raw[3] - b[3], raw[4] - b[4], raw[5] - b[5]])
         w.flags.writeable = False
         self._publish(Wrench(w[:3], w[3:], rec.ft_sequence, rec.status), now)
@@ -275,7 +274,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
     @property
     def bias(self) -> Wrench:
         """Current software bias (force N, torque N·m; copies), subtracted from every sample."""
-        return named_wrench(self._bias.copy())
+        return named_wrench(np.array(self._bias))
 
     def set_bias(self, *, force: ArrayLike, torque: ArrayLike) -> None:
         """Set the software bias: ``force`` (3,) N and ``torque`` (3,) N·m, sensor frame."""
@@ -286,8 +285,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
         """Set the software bias from a (6,) array in :data:`WIRE_ORDER`."""
         if not np.all(np.isfinite(bias)):
             raise ValueError("bias must be finite")
-        self._bias = bias
-        self._bias_values = bias.tolist()  # atomic reference swap, what the reader thread reads
+        self._bias = bias.tolist()  # atomic reference swap, read by the reader thread
 
     def clear_bias(self) -> None:
         """Remove the software bias."""
