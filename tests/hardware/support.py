@@ -20,7 +20,9 @@ from lapwrench.controller import Controller
 from lapwrench.drivers.ft import Wrench
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.frankysim import frankysim_available
+from lapwrench.hardware.rt import CTL_CYCLES, bus_layout
 from lapwrench.hardware.runner import ControlLoop, Sources
+from lapwrench.hardware.shm import Bus
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 
 FRANKYSIM_MISSING = frankysim_available()
@@ -187,12 +189,7 @@ class RobotTimeForce:
     _bus: Any = field(default=None, repr=False)  # kept: its memory is unmapped when it goes
 
     def __call__(self, _wall_t: float) -> np.ndarray:
-        from lapwrench.hardware.rt import CTL_CYCLES
-
         if self._bus is None:
-            from lapwrench.hardware.rt import bus_layout
-            from lapwrench.hardware.shm import Bus
-
             self._bus = Bus.attach(self.bus_name, bus_layout(*self.bus_rows))
         return pushed_force(self.pushes, float(self._bus["ctl"][CTL_CYCLES]) * self.dt)
 
