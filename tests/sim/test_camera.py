@@ -75,3 +75,51 @@ def test_frames_are_held_at_most_until_the_next_frame_and_the_detection_is_due()
     assert frame_hold(25.0, 0.0, image_free=True) == pytest.approx(0.04)  # the detector ignores the image
     assert frame_hold(25.0, "measured", image_free=False) == 0.0
     assert frame_hold(25.0, 0.0, image_free=False) < 2.5 * CONTROL_DT  # handed over at once
+
+
+def test_a_camera_that_does_not_draw_keeps_the_frame_clock_of_one_that_does(panda_scene: Scene) -> None:
+    w = make_renderable_world(panda_scene)
+    drawing, clock_only = SimCamera(w), SimCamera(w, draw=False, background=True)
+    try:
+        assert clock_only.offscreen is None  # nothing to draw: no render process either
+        ticks = [k * CONTROL_DT for k in range(1000)]
+        assert [clock_only.capture(t) for t in ticks] == [drawing.capture(t) for t in ticks]
+        assert sum(clock_only.capture(1.0 + t) for t in ticks) == 25
+        assert clock_only.frame is not None and clock_only.frame.size == 0 and clock_only.stamp > 1.9
+        assert drawing.frame is not None and drawing.frame.size > 0
+    finally:
+        drawing.close()
+        clock_only.close()
+        w.close()
+
+
+def projected_run(on_frame: bool) -> tuple[list[float], list[np.ndarray], np.ndarray, bool]:
+    """Frame times handed to the callback, the detections' points, the commands, and whether the camera draws."""
+    seen: list[float] = []
+    loop = ClosedLoop(load(), seed=0, detector="projected",
+                      on_frame=(lambda f, t, mode: seen.append(t)) if on_frame else None)
+    rest = loop.world.incision_rest_position()
+    points, q_refs = [], []
+    try:
+        assert loop.camera is not None and loop.detection is not None
+        for k in range(90):
+            loop.world.set_instrument_tip(0, rest + np.array([0.01 - 1e-4 * k, 0.0, -0.145]))
+            q_refs.append(loop.step(0.0).q_ref.copy())
+            points.append(loop.detection.observation(loop.t).points.copy())
+        return seen, points, np.array(q_refs), loop.camera.draws
+    finally:
+        loop.close()
+
+
+def test_the_projected_detector_alone_draws_no_frames_and_detects_the_same() -> None:
+    """Without anyone taking the images (no frame callback, no live telemetry) a loop with the projected
+    detector draws nothing; its detections, at the same capture times, steer the same commands."""
+    make_renderable_world().close()  # skips without headless GL
+    seen, points, q_refs, draws = projected_run(on_frame=True)
+    seen_none, points_none, q_refs_none, draws_none = projected_run(on_frame=False)
+    assert draws and not draws_none
+    assert seen == pytest.approx([0.0, 0.04, 0.08]) and seen_none == []
+    assert len(points_none) == len(points) and len(points[-1]) > 0
+    for a, b in zip(points, points_none, strict=True):
+        np.testing.assert_array_equal(b, a)
+    np.testing.assert_array_equal(q_refs_none, q_refs)

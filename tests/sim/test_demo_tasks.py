@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from lapwrench.sim.demo_tasks import IMAGE_SCENARIOS, PRINTED_DAMPING, core_to_spare, detector_threads, task_cost
+from lapwrench.sim.demo_tasks import (
+    IMAGE_SCENARIOS,
+    PRINTED_DAMPING,
+    TRACKING_SCENARIOS,
+    core_to_spare,
+    detector_threads,
+    task_cost,
+)
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS
 
 
@@ -25,9 +32,12 @@ def test_the_scenarios_that_render_and_detect_go_first() -> None:
     assert task_cost(PRINTED_DAMPING, "shipped") == task_cost("needle-search", "shipped")  # it is a needle search
 
 
-def test_without_an_image_detector_only_the_rendering_weighs() -> None:
+def test_without_an_image_detector_only_the_rendering_weighs_where_the_report_keeps_frames() -> None:
     for name in IMAGE_SCENARIOS:
-        assert task_cost(name, "shipped") > task_cost(name, "projected") > task_cost(name, "projected") / 2
+        assert task_cost(name, "shipped") > task_cost(name, "projected")
+    for name in TRACKING_SCENARIOS:  # drawn for the snapshot strip and the video
+        assert task_cost(name, "projected") == 2.0 * SIM_SECONDS[name]
+    assert task_cost("zoom", "projected") == SIM_SECONDS["zoom"]  # nothing drawn
     assert task_cost("grip", "shipped") == task_cost("grip", "projected") == SIM_SECONDS["grip"]
 
 

@@ -11,7 +11,7 @@ import pytest
 from lapwrench.config import Config
 from lapwrench.controller import TickResult
 from lapwrench.ui.inputs import UiInputError
-from lapwrench.ui.session import NoRenderCamera, Session
+from lapwrench.ui.session import Session
 
 
 def run(session: Session, seconds: float) -> list[TickResult | None]:
@@ -177,10 +177,11 @@ def test_the_scripted_view_adjustment_grips_and_turns(session: Session) -> None:
     assert angle_deg(d0, session.closed.world.shaft_axis()[1]) > 0.5
 
 
-def test_the_no_render_camera_keeps_the_frame_clock() -> None:
-    cam = NoRenderCamera(25.0)
-    captured = sum(cam.capture(k * 0.001) for k in range(1000))
-    assert captured == 25
+def test_with_the_projected_detector_the_loop_draws_no_frames(session: Session) -> None:
+    cam = session.closed.camera
+    assert cam is not None and not cam.draws  # the page's view renders on its own thread
+    run(session, 0.1)
+    assert session.closed.detection is not None and session.closed.detection.frames_captured == 3
 
 
 def test_a_restart_takes_the_grips_weight_off_from_where_the_sensor_was_tared(session: Session, cfg: Config) -> None:

@@ -43,6 +43,10 @@ def frame_hold(fps: float, latency: float | str, image_free: bool) -> float:
 class SimCamera:
     """Laparoscope frames at ``fps`` (default 25), rendered headless without shadows.
 
+    With ``draw=False`` it keeps the frame clock only: a due frame is 'captured' as :data:`NO_IMAGE`,
+    nothing is rendered (for an image-free detector, projected geometry, with no one to show the frames
+    to: the detections come at the same capture times as with frames drawn).
+
     :meth:`capture` renders a due frame at once. With ``background`` a due frame can instead be
     begun (:meth:`begin`) in a child process (:class:`~lapwrench.sim.offscreen.OffscreenRenderer`)
     while the simulation steps on, and collected later (:meth:`finish`): the same image, drawn from
@@ -50,21 +54,23 @@ class SimCamera:
     are the latest frame drawn and its capture time (s), always updated together.
     """
 
-    def __init__(self, world: SimWorld, fps: float = 25.0, *, background: bool = False) -> None:
+    def __init__(self, world: SimWorld, fps: float = 25.0, *, background: bool = False, draw: bool = True) -> None:
         check_rate(fps, "camera")
         self.fps = fps
         self.world = world
+        self.draws = draw
         self._clock = SampleAndHold(fps)
-        self.frame: np.ndarray | None = None
+        self.frame: np.ndarray | None = None if draw else NO_IMAGE
         self.stamp = -np.inf
-        self.offscreen = OffscreenRenderer(world, CAMERA_NAME) if background else None
+        self.offscreen = OffscreenRenderer(world, CAMERA_NAME) if background and draw else None
         self._begun = False
         self._begun_at = -np.inf
 
     def capture(self, t: float) -> bool:
         """Render a new frame if one is due at ``t``; returns True when it did."""
         if self._clock.due(t):
-            self.frame = self.world.render()
+            if self.draws:
+                self.frame = self.world.render()
             self.stamp = t
             return True
         return False
@@ -82,7 +88,8 @@ class SimCamera:
                 off.result()  # the previous frame, never collected
             if off.start():
                 return True
-        self.frame, self.stamp = self.world.render(), t  # no background, or no forward to draw from: now
+        # no background, or no forward to draw from: now
+        self.frame, self.stamp = self.world.render() if self.draws else NO_IMAGE, t
         return True
 
     def finish(self) -> np.ndarray:

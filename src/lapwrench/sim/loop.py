@@ -108,6 +108,10 @@ class ClosedLoop:
     trocar's stiffness, the detector's latency (unless ``detection_latency`` is given), dropout and
     noise. The hands are the scenario's (they scale with :meth:`WorldVariation.hand`).
 
+    The camera (:attr:`camera`) draws its frames only for someone: an image detector, ``on_frame`` or live
+    telemetry. A run whose only user of it is the projected detector keeps its clock and draws nothing
+    (the same detections at the same capture times).
+
     ``render_in_background`` draws the camera's frames in a child process while the loop steps on
     (:meth:`_camera_step`): the same images, handed over with their capture times, the detector's
     results published at the same simulated times; a frame still being drawn when a run ends is handed
@@ -119,7 +123,6 @@ class ClosedLoop:
         cfg: Config,
         seed: int = 0,
         *,
-        camera: bool = False,
         detector: str | None = None,
         detection_latency: float | None = None,
         scene_config: SceneConfig | None = None,
@@ -156,8 +159,10 @@ class ClosedLoop:
         # Frames drawn in a child process while the loop steps on (see _camera_step): not for a
         # measured latency (known only once detected) nor for live telemetry (it reads the loop's state).
         background = render_in_background and latency_s != "measured" and not self._frame_observers
-        self.camera = (SimCamera(self.world, background=background)
-                       if (camera or detector is not None or on_frame) else None)
+        # the projected detector alone needs the camera's clock, not its images
+        draw = on_frame is not None or bool(self._frame_observers) or detector not in (None, "projected")
+        self.camera = (SimCamera(self.world, background=background, draw=draw)
+                       if detector is not None or on_frame is not None else None)
         self.detection: SimulatedAsyncDetector | None = None
         self.detector_name = "none"
         if detector is not None:
@@ -233,7 +238,7 @@ class ClosedLoop:
             return
         if self._pending is not None and t >= self._pending.deliver_by:
             self._deliver_frame()
-        if getattr(cam, "offscreen", None) is None:  # drawn now (also a camera swapped in after construction)
+        if cam.offscreen is None:  # drawn now (or not drawn at all: the clock alone)
             if cam.capture(t):
                 self._publish(cam.frame, t, self.last_mode, detect=True)
             return
@@ -269,7 +274,7 @@ class ClosedLoop:
     def close(self) -> None:
         """:meth:`flush_frames`, then end the camera's render process and free the world's renderers."""
         self.flush_frames()
-        if isinstance(self.camera, SimCamera):
+        if self.camera is not None:
             self.camera.close()
         self.world.close()
 

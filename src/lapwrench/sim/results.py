@@ -48,6 +48,7 @@ class ScenarioOptions:
     seed: int = 0
     time_scale: float = 1.0
     video_dir: Path | None = None  # write the laparoscope view of the tracking scenarios here
+    frames: bool = True  # keep the laparoscope view's frames (the snapshot strip); False: none drawn for it
     progress: Callable[[float], None] | None = None  # called with simulated seconds advanced
     detector: str = "shipped"  # "shipped", "classical", "projected" or a model path
     detector_threads: int | None = None  # onnxruntime threads of an ONNX detector (None: its default)

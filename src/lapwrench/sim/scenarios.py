@@ -158,8 +158,10 @@ def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> Scenari
         if round(t / 0.04) % 50 == 0:  # every 2 s for the snapshot strip
             snapshots.append((frame, label))
 
-    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame, world=opts.world,
-                      detector_threads=opts.detector_threads, render_in_background=opts.render_in_background)
+    wanted = opts.frames or writer is not None  # with neither, only an image detector draws the frames
+    loop = ClosedLoop(cfg, seed=opts.seed, detector=opts.detector, on_frame=on_frame if wanted else None,
+                      world=opts.world, detector_threads=opts.detector_threads,
+                      render_in_background=opts.render_in_background)
     trace = Trace()
     t0 = time.perf_counter()
     try:

@@ -74,8 +74,8 @@ def run_job(job: Job, study: str) -> list[dict]:
     started, t0 = time.time(), time.perf_counter()
     try:
         cfg = config_mod.from_dict(job.config)
-        opts = ScenarioOptions(seed=job.seed, time_scale=job.time_scale, detector=job.detector,
-                               world=WorldVariation.from_dict(job.world))
+        opts = ScenarioOptions(seed=job.seed, time_scale=job.time_scale, detector=job.detector, frames=False,
+                               world=WorldVariation.from_dict(job.world))  # a study keeps metrics, no pictures
         result = SCENARIOS[job.scenario](cfg, opts)
     except Exception as exc:
         return job_rows(job, study, None, one_line(exc), time.perf_counter() - t0, started)

@@ -47,31 +47,12 @@ SHIFT = (0.0, 0.01)  # m, the Fig. 5 housing shift
 KEPT_RECORDS = 10_000  # the closed loop's per-tick lists are trimmed to this many
 
 
-class NoRenderCamera:
-    """The camera clock of a run whose detector ignores the image (projected geometry): frames are
-    'captured' at ``fps`` without rendering, so the detection timing is the real one and the page's
-    view renders on its own thread (:mod:`lapwrench.ui.view`)."""
-
-    def __init__(self, fps: float) -> None:
-        self.fps = float(fps)
-        self.frame = np.zeros((1, 1, 3), np.uint8)
-        self.stamp = -np.inf
-
-    def capture(self, t: float) -> bool:
-        if t + 1e-9 >= self.stamp + 1.0 / self.fps:
-            self.stamp = t
-            return True
-        return False
-
-
 def build_loop(cfg: Config, seed: int, detector: str) -> ClosedLoop:
-    """A closed loop with ``detector`` (one of :data:`DETECTORS`). With ``projected`` nothing is rendered
-    in the loop (see :class:`NoRenderCamera`); the shipped YOLO model detects on rendered frames."""
+    """A closed loop with ``detector`` (one of :data:`DETECTORS`). With ``projected`` the loop keeps the
+    camera's clock and draws nothing (the page's view renders on its own thread, :mod:`lapwrench.ui.view`)
+    unless live telemetry takes the frames; the shipped YOLO model detects on rendered frames."""
     checked_choice(detector, "detector", DETECTORS)
-    closed = ClosedLoop(cfg, seed=seed, camera=True, detector=detector)
-    if detector == "projected":
-        assert closed.camera is not None
-        closed.camera = NoRenderCamera(closed.camera.fps)  # type: ignore[assignment]
+    closed = ClosedLoop(cfg, seed=seed, detector=detector)
     for i in range(closed.world.n_instruments):
         park_instrument(closed.world, i)
     return closed

@@ -25,7 +25,7 @@ import numpy as np
 from lapwrench.config import Config, from_dict, to_dict
 from lapwrench.controller import TickResult
 from lapwrench.sim.scene.names import CAMERA_NAME
-from lapwrench.ui.session import NoRenderCamera, Session, Snapshot
+from lapwrench.ui.session import Session, Snapshot
 
 MIN_FPS = 5.0  # the view's lowest frame rate when the simulation falls behind
 RENDER_NICE = 5  # the render process's niceness above the simulation's: on a busy machine frames wait
@@ -154,7 +154,7 @@ class LaparoscopeView:
         closed = session.closed
         cam = closed.camera
         with self._lock:
-            if cam is not None and not isinstance(cam, NoRenderCamera):  # the loop renders: reuse its frames
+            if cam is not None and cam.draws:  # the loop renders: reuse its frames
                 if cam.stamp <= self._camera_stamp or cam.frame is None:
                     return
                 self._camera_stamp = cam.stamp
