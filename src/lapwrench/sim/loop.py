@@ -90,9 +90,9 @@ _OBSERVERS: list[CycleObserver] = []
 @contextlib.contextmanager
 def observe_cycles(observer: CycleObserver) -> Iterator[None]:
     """Every :class:`ClosedLoop` built while this is active calls ``observer(loop, cycle)`` after each
-    of its cycles (the command sent), and ``observer.frame(loop, image, t)`` with each rendered camera
-    frame if the observer has that method: how an application above the simulation (live telemetry)
-    sees the runs of scenarios that build their own loops."""
+    of its cycles (the command sent), and ``observer.frame(loop, image, t)`` with each camera frame if
+    the observer has that method (an empty image when the loop draws none, :class:`ClosedLoop`): how an
+    application above the simulation (live telemetry) sees the runs of scenarios that build their own loops."""
     _OBSERVERS.append(observer)
     try:
         yield
@@ -108,9 +108,9 @@ class ClosedLoop:
     trocar's stiffness, the detector's latency (unless ``detection_latency`` is given), dropout and
     noise. The hands are the scenario's (they scale with :meth:`WorldVariation.hand`).
 
-    The camera (:attr:`camera`) draws its frames only for someone: an image detector, ``on_frame`` or live
-    telemetry. A run whose only user of it is the projected detector keeps its clock and draws nothing
-    (the same detections at the same capture times).
+    The camera (:attr:`camera`) draws its frames only for an image detector or ``on_frame``. A run with the
+    projected detector and no ``on_frame`` keeps its clock and draws nothing (the same detections at the
+    same capture times); its frame observers get :data:`~lapwrench.sim.camera.NO_IMAGE`.
 
     ``render_in_background`` draws the camera's frames in a child process while the loop steps on
     (:meth:`_camera_step`): the same images, handed over with their capture times, the detector's
@@ -159,8 +159,9 @@ class ClosedLoop:
         # Frames drawn in a child process while the loop steps on (see _camera_step): not for a
         # measured latency (known only once detected) nor for live telemetry (it reads the loop's state).
         background = render_in_background and latency_s != "measured" and not self._frame_observers
-        # the projected detector alone needs the camera's clock, not its images
-        draw = on_frame is not None or bool(self._frame_observers) or detector not in (None, "projected")
+        # the projected detector alone needs the camera's clock, not its images (live telemetry is then
+        # handed empty frames, and draws the few it sends itself)
+        draw = on_frame is not None or detector not in (None, "projected")
         self.camera = (SimCamera(self.world, background=background, draw=draw)
                        if detector is not None or on_frame is not None else None)
         self.detection: SimulatedAsyncDetector | None = None

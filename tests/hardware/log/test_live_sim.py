@@ -43,10 +43,35 @@ def test_rendered_frames_reach_the_log_at_5_hz_of_simulated_time(tmp_path: Path)
 
     path = tmp_path / "frames.mcap"
     with RunLogger(path, None) as logger, observe_cycles(SimTelemetry(logger)):
-        loop = ClosedLoop(load(), detector="projected")  # renders the camera at 25 fps
+        loop = ClosedLoop(load(), detector="projected")  # draws no frames: the telemetry draws its own
         for _ in range(1000):  # 1 s
             loop.step(0.0)
+    assert loop.camera is not None and not loop.camera.draws
     assert 4 <= log_topics(path)[IMAGE_TOPIC].messages <= 6
+
+
+class _Images:
+    """A run logger that keeps the images it is given."""
+
+    def __init__(self) -> None:
+        self.images: list[np.ndarray] = []
+
+    def image(self, t: float, img: np.ndarray) -> None:
+        self.images.append(img)
+
+
+def test_the_telemetry_draws_the_frames_it_sends_when_the_loop_draws_none() -> None:
+    logger = _Images()
+    loop = ClosedLoop(load(), detector="projected")
+    tel = SimTelemetry(logger)
+    try:
+        tel.frame(loop, np.zeros((0, 0, 3), np.uint8), 0.0)
+        tel.frame(loop, np.zeros((0, 0, 3), np.uint8), 0.1)  # within 200 ms of the last: not sent
+    finally:
+        loop.close()
+    cam = load().camera
+    assert len(logger.images) == 1 and logger.images[0].shape == (cam.height, cam.width, 3)
+    assert logger.images[0].std() > 1.0  # a drawn scene, not a blank
 
 
 async def _cycle_messages(port: int, step: Callable[[], None], n: int) -> tuple[bytes, list[bytes]]:

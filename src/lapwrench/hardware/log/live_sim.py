@@ -38,10 +38,13 @@ class SimTelemetry:
         self._next_image = 0.0
 
     def frame(self, loop: Any, image: Any, t: float) -> None:
-        """A rendered laparoscope frame (5 Hz of session time) with the loop's latest detections."""
+        """A laparoscope frame (5 Hz of session time) with the loop's latest detections; drawn here when
+        the loop draws none (its detector, projected geometry, needs no image)."""
         if t < self._next_image:
             return
         self._next_image = t + IMAGE_PERIOD_S
+        if image.size == 0:
+            image = loop.world.render()
         obs = loop.detection.observation(t) if loop.detection is not None else None
         points = None if obs is None else obs.points
         self.logger.image(self._offset + t, annotated_view(image, points, loop.cfg, loop.last_mode))
