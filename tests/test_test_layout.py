@@ -23,6 +23,7 @@ UNTESTED: dict[str, str] = {
 # Test files that are not about one module (tests/README.md says why).
 NOT_A_MODULE: set[str] = {
     "test_layers.py",
+    "test_module_size.py",
     "test_no_joint_count.py",
     "test_test_layout.py",
     "hardware/test_faults.py",

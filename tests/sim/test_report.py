@@ -1,6 +1,6 @@
-"""The demo's report (:mod:`lapwrench.sim.report`), built from small synthetic results: the Markdown page,
-metrics.json, and the plots. The demo end to end (which calls these with real runs) is in
-tests/sim/test_demo.py."""
+"""The demo's report (:mod:`lapwrench.sim.report`), built from small synthetic results: the Markdown page
+and metrics.json (the plots it links: tests/sim/test_plots.py). The demo end to end (which calls these
+with real runs) is in tests/sim/test_demo.py."""
 
 from __future__ import annotations
 
@@ -8,88 +8,12 @@ import json
 import math
 from pathlib import Path
 
-import matplotlib.image as mpimg
 import numpy as np
 import pytest
+from sim.report_data import META, disturbance, grip, hard_push, needle_search
 
-from lapwrench.config import load
 from lapwrench.sim import report
-from lapwrench.sim.loop import Trace
-from lapwrench.sim.results import Run, ScenarioResult
-
-N = 50  # ticks of a synthetic trace
-META = {
-    "seed": 7, "robot": "fr3", "physics_dt_ms": 0.5, "wall_s": 12.4, "sim_s": 30.0, "instrument_source": "classical"
-}
-
-
-def trace(n: int = N, **extra: np.ndarray) -> Trace:
-    """A trace with the columns the plots read: a scope pivoting slowly about a fixed incision."""
-    t = np.arange(n) * 1e-3
-    s = np.linspace(0.0, 1.0, n)
-    d_z = np.stack([np.zeros(n), np.sin(0.1 * s), np.cos(0.1 * s)], axis=1)
-    cols = {
-        "t": t,
-        "delta": 1.0 + s,
-        "view_error_deg": 10.0 * (1.0 - s),
-        "contact_force": np.stack([np.zeros(n), 4.0 * s, np.ones(n)], axis=1),
-        "p_R": np.tile([0.4, 0.0, 0.3], (n, 1)) + 1e-3 * s[:, None],
-        "incision": np.tile([0.4, 0.0, 0.3], (n, 1)),
-        "p_E": np.tile([0.4, 0.0, 0.1], (n, 1)),
-        "d_z": d_z,
-        "W_h": np.tile([0.0, 0.0, 0.0, 1.0, 2.0, 2.0], (n, 1)),
-        "W_c": np.tile([0.0, 0.0, 0.0, 0.0, 4.0, 3.0], (n, 1)),
-        "rcm_error_phys": 1e-3 * s,
-        "pixel_error": np.where(s < 0.5, 80.0, np.nan),
-        "mode": np.array(["tracking"] * (n // 2) + ["handle"] * (n - n // 2)),
-        "tip_depth": 0.06 + 0.01 * s,
-        **extra,
-    }
-    return Trace(columns=cols)  # type: ignore[arg-type]
-
-
-def grip() -> ScenarioResult:
-    runs = [
-        Run(label, trace(), {"delta_mean": d, "completion_time_s": c, "rcm_error_max_mm": 0.5})
-        for label, d, c in (("high", 2.0, 6.0), ("medium", 1.1, None), ("low", 0.3, 20.0))
-    ]
-    paper = {"delta": [2.01, 1.13, 0.28], "completion_s": [6.32, 11.0, 19.46]}
-    return ScenarioResult("grip", runs, {"paper": paper, "completion_falls_as_delta_rises": False})
-
-
-def disturbance() -> ScenarioResult:
-    m = {"force_peak_after_load_N": 7.25, "force_back_below_5N_after_s": None, "force_final_N": 3.0,
-         "rcm_shift_mm": 9.876}
-    return ScenarioResult("rcm-disturbance", [Run("adaptive", trace(), m)], {"target_met": True})
-
-
-def needle_search(**metrics: object) -> ScenarioResult:
-    m = {
-        "rcm_error_max_mm": 1.5, "rcm_error_rms_mm": 0.4, "trocar_force_max_N": 6.0, "insertion_drift_mm": 3.0,
-        "references_inside_limits": True, "real_time_factor": 0.8,
-        # 0.1 s flickers between the dwells are left out of the mode sequence
-        "mode_timeline": [(0.0, "idle"), (1.0, "tracking"), (1.1, "handle"), (1.2, "tracking"), (3.0, "handle")],
-        **metrics,
-    }
-    return ScenarioResult("needle-search", [Run("run", trace(), {})], m, instrument_source="classical")
-
-
-def hard_push() -> ScenarioResult:
-    def run(label: str, passed: bool, t: bool = True) -> Run:
-        m = {
-            "kind": label.split()[0], "delta_mean": 1.0, "rcm_error_max_mm": 2.0, "trocar_force_max_N": 30.0,
-            "tilt_max_deg": 4.0, "depth_change_min_mm": -2.0, "depth_change_max_mm": 5.0, "tip_depth_min_mm": 58.0,
-            "tip_depth_max_mm": 65.0, "tip_depth_start_mm": 60.0, "envelope_hit_ticks": 3,
-            "envelope_walls": "depth_max×3" if passed else "", "alarm": None if passed else "hold at 0.500 s: rcm",
-            "references_inside_limits": True, "passed": passed, "failed_targets": "" if passed else "RCM",
-        }
-        return Run(label, trace() if t else Trace(), m)
-
-    targets = {"rcm_error_max_mm": 3.0, "trocar_force_max_N": 40.0, "tip_depth_min_mm": 30.0, "tip_depth_max_mm": 120.0}
-    metrics = {"push_s": 2.0, "settle_s": 1.0, "targets": targets, "passed": 1, "runs": 3, "alarms": 1,
-               "all_references_inside_limits": True, "still_moving": ["lateral 30 N"]}
-    return ScenarioResult("hard-push", [run("lateral 30 N", True), run("axial 50 N", False),
-                                        run("axial 80 N", False, t=False)], metrics)
+from lapwrench.sim.results import ScenarioResult
 
 
 def write(tmp_path: Path, results: dict[str, ScenarioResult], figures: dict | None = None, **meta: object) -> str:
@@ -195,58 +119,6 @@ def test_a_non_finite_metric_is_written_as_null(tmp_path: Path, bad: float) -> N
 
 
 # -- plots -------------------------------------------------------------------------------------------
-def png_size(path: Path) -> tuple[int, int]:
-    """(height, width) in pixels of a PNG written by the report."""
-    return mpimg.imread(path).shape[:2]
-
-
-@pytest.mark.parametrize(
-    ("plot", "result", "name"),
-    [
-        (report.plot_grip, grip, "grip.png"),
-        (report.plot_disturbance, disturbance, "rcm_disturbance.png"),
-        (report.plot_hard_push, hard_push, "hard_push.png"),  # one run stopped before its first tick
-    ],
-)
-def test_each_scenario_plot_writes_its_png(tmp_path: Path, plot, result, name: str) -> None:
-    assert plot(result(), tmp_path) == [name]
-    h, w = png_size(tmp_path / name)
-    assert h > 300 and w > 1000
-
-
-def test_the_tracking_plot_is_named_after_its_stem(tmp_path: Path) -> None:
-    assert report.plot_tracking_run(needle_search(), tmp_path, "needle_search") == ["needle_search.png"]
-    assert png_size(tmp_path / "needle_search.png") == (825, 1430)  # 13 x 7.5 in at 110 dpi
-
-
-def test_cue_columns_split_wrenches_from_telemetry() -> None:
-    tr = trace(**{"cue:zoom": np.zeros((N, 6)), "cue:zoom.spread": np.ones(N), "cue:keep-out": np.zeros((N, 6))})
-    assert report.cue_columns(tr) == (["cue:zoom", "cue:keep-out"], ["cue:zoom.spread"])
-    assert report.cue_columns(trace()) == ([], [])
-    assert report.cue_columns(object()) == ([], [])  # not a trace: no columns, no cues
-
-
-def test_a_result_without_cue_columns_draws_no_cue_plot(tmp_path: Path) -> None:
-    assert report.plot_cues(disturbance(), tmp_path, "rcm_disturbance") == []
-    assert not list(tmp_path.iterdir())
-
-
-def test_every_cue_is_plotted_with_no_code_per_cue(tmp_path: Path) -> None:
-    wrench = np.tile([0.0, 0.0, 0.0, 3.0, 4.0, 0.0], (N, 1))
-    runs = [Run(f"run {k}", trace(**{"cue:mine": wrench, "cue:mine.gain": np.ones(N)}), {}) for k in range(2)]
-    assert report.plot_cues(ScenarioResult("custom", runs, {}), tmp_path, "custom") == ["custom_cues.png"]
-    h, w = png_size(tmp_path / "custom_cues.png")
-    assert (h, w) == (round(2 * 2.6 * 110), 13 * 110)  # one row per run, telemetry beside the wrench
-
-
-@pytest.mark.parametrize(("count", "panels"), [(1, 1), (4, 4), (20, 6)])
-def test_the_snapshot_strip_shows_at_most_six_frames(tmp_path: Path, count: int, panels: int) -> None:
-    shots = [(np.full((48, 64, 3), 10 * k, np.uint8), f"t={k}") for k in range(count)]
-    assert report.snapshot_strip(shots, load(), tmp_path / "strip.png") == "strip.png"
-    assert png_size(tmp_path / "strip.png")[1] == 3 * panels * 110
-
-
-# -- notes -------------------------------------------------------------------------------------------
 def test_the_notes_say_how_the_demo_ran() -> None:
     notes = report.demo_notes(0.25, "fr3")
     assert "Simulation time scale 0.25 (1 = the paper's durations)." in notes

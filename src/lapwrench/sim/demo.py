@@ -22,7 +22,7 @@ import mujoco
 from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
-from lapwrench.sim import cue_scenarios, report
+from lapwrench.sim import cue_scenarios, plots, report
 from lapwrench.sim.demo_tasks import PRINTED_DAMPING, TRACKING_SCENARIOS, DemoError, DemoPlan, run_tasks
 from lapwrench.sim.results import ScenarioResult
 from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, scenarios_for
@@ -202,15 +202,15 @@ def _write_failed(out: Path, exc: BaseException) -> None:
 
 def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
     stem = name.replace("-", "_")
-    cues = report.plot_cues(res, out, stem)  # every cue the config ran, by name
-    own = {"grip": report.plot_grip, "rcm-disturbance": report.plot_disturbance, "hard-push": report.plot_hard_push}
+    cues = plots.plot_cues(res, out, stem)  # every cue the config ran, by name
+    own = {"grip": plots.plot_grip, "rcm-disturbance": plots.plot_disturbance, "hard-push": plots.plot_hard_push}
     if name in own:
         return own[name](res, out) + cues
     if name in cue_scenarios.SCENARIOS:
         return cue_scenarios.plot(name, res, out) + cues
-    figs = report.plot_tracking_run(res, out, stem) + cues
+    figs = plots.plot_tracking_run(res, out, stem) + cues
     if res.frames:
-        figs.append(report.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
+        figs.append(plots.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
     if (out / f"{name}.mp4").exists():
         figs.append(f"{name}.mp4")
     return figs
