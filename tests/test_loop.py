@@ -75,6 +75,25 @@ def test_wall_clock_deadlines_only_when_asked() -> None:
     assert loop.supervisor.deadline_misses == 5 and loop.supervisor.alarm  # 3 in a row: alarm
 
 
+def test_after_command_runs_once_a_cycle_after_the_command_outside_the_compute_time() -> None:
+    """The real-time process's F/T drain, shared inputs and peer watch: after ``robot.command``, with the
+    cycle's clock time, and never counted in the compute time the deadline is checked on."""
+    order: list[tuple[str, float]] = []
+
+    def after(now: float) -> None:
+        order.append(("after", now))
+        time.sleep(0.002)  # over the 0.8 ms budget, were it compute time
+
+    loop, clock = _loop(wall_deadlines=True, after_command=after)
+    command = loop.robot.command
+    loop.robot.command = lambda q: (order.append(("command", clock[0])), command(q))[1]  # type: ignore[method-assign]
+    cycles = _cycles(loop, clock, 4)
+    assert [kind for kind, _ in order] == ["command", "after"] * 4
+    assert [now for kind, now in order if kind == "after"] == pytest.approx([k * DT for k in range(4)])
+    assert all(c.compute < 0.002 for c in cycles)  # the 2 ms slept after each command is not compute time
+    assert loop.supervisor.deadline_misses == 0 and not loop.supervisor.alarm
+
+
 def test_a_controller_exception_becomes_an_alarm_and_the_arm_stops_at_rest() -> None:
     loop, clock = _loop(wall_deadlines=False)
     _cycles(loop, clock, 200)

@@ -13,6 +13,7 @@ One cycle (:meth:`ControlLoop.cycle`)::
     scope   = measure_scope(model, reading.q, result.p_R)
     q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
     robot.command(q)
+    after_command(now)                     # the real-time process: F/T drain, shared inputs, peer watch
 
 The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`). The records a
 cycle and a run produce (:class:`Cycle`, :class:`LoopStats`) live in :mod:`lapwrench.loop_stats`
@@ -64,8 +65,12 @@ class ControlLoop:
         command_hook: Test seam for fault injection: ``f(k, q_ref) -> q_ref`` replaces the
             controller's command of cycle ``k`` before the supervisor sees it.
         compute_hook: Test seam: called with ``k`` inside the measured compute time.
-        pre_cycle: Called with the clock time right after ``robot.read()``, inside the compute time
-            (the real-time process drains the F/T socket and checks its peers there).
+        pre_cycle: Called with the clock time right after ``robot.read()``, inside the compute time (the
+            real-time process catches up on the F/T socket there after a late cycle).
+        after_command: Called with the cycle's clock time right after ``robot.command``, outside the
+            compute time: work the command does not wait for, in the slack before the next state (the
+            real-time process drains the F/T socket, reads its shared inputs and checks its peers
+            there, for the next cycle's tick).
         before_command: Called with the session time just before ``robot.command`` (the simulation
             applies its scripted forces there).
         stop_timeout: Robot seconds allowed for the final stop to come to rest.
@@ -87,6 +92,7 @@ class ControlLoop:
         command_hook: Callable[[int, Vec], Vec] | None = None,
         compute_hook: Callable[[int], None] | None = None,
         pre_cycle: Callable[[float], None] | None = None,
+        after_command: Callable[[float], None] | None = None,
         before_command: Callable[[float], None] | None = None,
         stop_timeout: float = 5.0,
         switch_interval: float | None = 1e-4,
@@ -108,6 +114,7 @@ class ControlLoop:
         self.command_hook = command_hook
         self.compute_hook = compute_hook
         self.pre_cycle = pre_cycle
+        self.after_command = after_command
         self.before_command = before_command
         self.stop_timeout = stop_timeout
         self.switch_interval = switch_interval
@@ -185,6 +192,8 @@ class ControlLoop:
         if self.before_command is not None:
             self.before_command(frame.time)
         self.robot.command(q_cmd)
+        if self.after_command is not None:
+            self.after_command(now)
         period = 0.0 if self._t_prev is None else t_read - self._t_prev
         self._t_prev = t_read
         out = Cycle(self.k, frame, reading, result, scope, q_cmd, compute, period, sup.drain_events())

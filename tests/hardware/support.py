@@ -175,6 +175,30 @@ def pushed_force(pushes: Pushes, t: float) -> np.ndarray:
     return np.zeros(3)
 
 
+class StallingRobot:
+    """A robot whose ``read`` stalls ``stall_s`` every ``every`` cycles (a late state from the robot's side,
+    as franky-sim gives on a busy machine); everything else is the wrapped robot's."""
+
+    def __init__(self, robot: Any, every: int, stall_s: float) -> None:
+        self._robot, self._every, self._stall_s, self._reads = robot, every, stall_s, 0
+
+    def read(self) -> Any:
+        self._reads += 1
+        if self._reads % self._every == 0:
+            time.sleep(self._stall_s)
+        return self._robot.read()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._robot, name)
+
+
+def stalling_sim_factory(cfg: Any, script: Any, *, every: int = 250, stall_s: float = 0.03) -> Any:
+    """:func:`~lapwrench.hardware.rt.sim_factory`'s robot, stalling (:class:`StallingRobot`)."""
+    from lapwrench.hardware.rt import sim_factory
+
+    return StallingRobot(sim_factory(cfg, script, realtime=True), every, stall_s)
+
+
 @dataclass
 class RobotTimeForce:
     """:func:`pushed_force` at the loop's robot time (its cycle count on the real-time bus times ``dt``): the

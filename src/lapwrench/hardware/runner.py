@@ -170,14 +170,16 @@ class ControlLoop(loop.ControlLoop):
         stop_timeout: float = 5.0,
         switch_interval: float | None = 1e-4,
         pre_cycle: Callable[[float], None] | None = None,
+        after_command: Callable[[float], None] | None = None,
         gc_freeze: bool = False,
     ) -> None:
         self.ages = ages or SourceAges()
         self.logger = logger
         super().__init__(
             robot, controller, supervisor, (), clock=time.monotonic, wall_deadlines=True, on_cycle=self._log,
-            on_events=self._log_events, command_hook=command_hook, compute_hook=compute_hook, pre_cycle=pre_cycle,
-            stop_timeout=stop_timeout, switch_interval=switch_interval, gc_freeze=gc_freeze,
+            on_events=self._log_events, command_hook=command_hook, compute_hook=compute_hook,
+            pre_cycle=pre_cycle, after_command=after_command, stop_timeout=stop_timeout,
+            switch_interval=switch_interval, gc_freeze=gc_freeze,
         )
         self.sources = sources or Sources()  # type: ignore[assignment]
 

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from hardware.support import rt_process, rt_spec
+from hardware.support import rt_process, rt_spec, stalling_sim_factory
 
 from lapwrench.config import Config
 from lapwrench.drivers.base import DeviceError
@@ -127,3 +127,38 @@ def test_sigint_is_ignored_and_sigterm_stops_the_loop_to_rest(panda_cfg: Config)
     assert report["log_dropped"] == 0 and report["encode_errors"] == 0
     # the spec's loop hook ran in the child, on its loop, and its report was merged
     assert report["probe_robot"] == "simulated panda (MuJoCo)" and report["probe_pid"] == rp.pid
+
+
+def _no_push(t: float) -> Any:
+    import numpy as np
+
+    return np.zeros(3)
+
+
+@pytest.mark.slow  # a real-time process, an F/T box process and a simulated robot
+def test_after_a_late_state_the_tick_reads_f_t_data_drained_at_that_cycle(panda_cfg: Config) -> None:
+    """The F/T socket is drained after each command (for the next tick); a state that comes 30 ms late (the
+    robot's side stalled) makes the loop drain it again before its tick, so every tick reads F/T data under
+    the 20 ms maximum age: the hand's wrench never drops out for a stall of the robot's side."""
+    import functools
+
+    from lapwrench.hardware.devices import SimulatedHexProcess
+    from lapwrench.hardware.rt import FtSpec
+
+    box = SimulatedHexProcess(_no_push, rate_hz=1000.0).start()
+    rp = rt_process(rt_spec(panda_cfg, robot_factory=functools.partial(stalling_sim_factory, every=250,
+                                                                          stall_s=0.03)))
+    try:
+        box.set_t0(time.monotonic())
+        rp.spec.ft = FtSpec("hex", "127.0.0.1", box.port, tare=True, tare_samples=50)
+        rp.start()
+        res = rp.run(1.5)
+    finally:
+        rp.close()
+        box.close()
+    st, report = res.stats, res.report
+    assert st.alarm is None and st.stopped_at_rest
+    stalls = st.cycles // 250
+    assert stalls >= 5 and report["ft_catch_ups"] >= stalls  # a catch-up after each stall (and any other late state)
+    assert report["ft_fresh_cycles"] == report["hook_cycles"] == st.cycles  # every tick: F/T data under 20 ms old
+    assert report["ft_datagrams"] > 0.5 * st.cycles

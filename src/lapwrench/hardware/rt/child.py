@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing as mp
 import os
 import signal
@@ -32,11 +33,27 @@ from lapwrench.hardware.rt.options import apply_realtime
 from lapwrench.hardware.rt.peers import PeerSpec, PeerWatch
 from lapwrench.hardware.rt.spec import FtSpec, RtSpec
 from lapwrench.hardware.shm import Bus
+from lapwrench.loop_stats import Growable
 from lapwrench.robot.errors import RobotError
+
+FT_CATCH_UP_S = 0.005
+"""A cycle that starts more than this after the last F/T drain (the previous cycle came late: a stall of
+the robot's side) drains the socket again before its tick, so the F/T data a tick reads is never more
+than this older than a drain at the tick would give (a quarter of the default 20 ms maximum age, well
+inside the box's own filter delay for a hand's push)."""
 
 
 class _CycleHooks:
-    """The child's ``pre_cycle``: heartbeat, F/T drain, shared inputs, peer watch."""
+    """The child's work around each cycle.
+
+    :meth:`after_command` (the loop's ``after_command``): heartbeat, F/T drain, shared inputs, peer
+    watch, after the command is sent, in the slack before the next state; the next tick reads what they
+    gathered, under 1 ms older. Once before the first cycle too. Each call is timed (:attr:`hook_us`):
+    part of the cycle's work, though not of the command's latency.
+
+    :meth:`before_tick` (the loop's ``pre_cycle``): after a late cycle, the F/T drain again
+    (:data:`FT_CATCH_UP_S`); then the F/T sample the tick will read is counted fresh or not.
+    """
 
     def __init__(self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch) -> None:
         self.ctl, self.beat = bus["ctl"], bus["beat"]
@@ -47,23 +64,41 @@ class _CycleHooks:
         self.cycles = 0
         self.ft_fresh = 0
         self.ft_datagrams = 0
+        self.ft_catch_ups = 0
         self.fault: str | None = None
+        self.hook_us = Growable()  # the time each after_command took (µs)
+        self._drained_at = -math.inf
 
     def _alarm(self, now: float, kind: str, message: str) -> None:
         if self.fault is None:
             self.fault = f"{kind}: {message}"
             self.loop.supervisor.raise_alarm(self.loop.session_time(now), kind, message)
 
-    def __call__(self, now: float) -> None:
+    def before_tick(self, now: float) -> None:
+        ft = self.ft
+        if ft is None:
+            return
+        if now - self._drained_at > FT_CATCH_UP_S:
+            self.ft_datagrams += ft.drain(now)
+            self._drained_at = now
+            self.ft_catch_ups += 1
+        s = ft.buffer.get()
+        if s is not None and now - s.timestamp <= self.ft_max_age:
+            self.ft_fresh += 1
+
+    def after_command(self, now: float) -> None:
+        t0 = time.perf_counter()
+        self._after_command(now)
+        self.hook_us.append((time.perf_counter() - t0) * 1e6)
+
+    def _after_command(self, now: float) -> None:
         self.beat[BEAT_CHILD] = now
         self.cycles += 1
         self.ctl[CTL_CYCLES] = self.cycles
         ft = self.ft
         if ft is not None:
             self.ft_datagrams += ft.drain(now)
-            s = ft.buffer.get()
-            if s is not None and now - s.timestamp <= self.ft_max_age:
-                self.ft_fresh += 1
+            self._drained_at = now
         for inp in self.inputs.values():
             problem = inp.refresh(now)
             if problem is not None:
@@ -84,7 +119,9 @@ class _CycleHooks:
             "ft_fresh_cycles": self.ft_fresh,
             "hook_cycles": self.cycles,
             "ft_datagrams": self.ft_datagrams,
+            "ft_catch_ups": self.ft_catch_ups,
             "peer_fault": self.fault,
+            "hook_us": self.hook_us.array(),
             "torn_reads": {k: v.torn for k, v in self.inputs.items()},
         }
 
@@ -192,7 +229,8 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
             sources,  # type: ignore[arg-type]
             ages=spec.ages,
             logger=sink,  # type: ignore[arg-type]
-            pre_cycle=hooks,
+            pre_cycle=hooks.before_tick,
+            after_command=hooks.after_command,
             gc_freeze=spec.rt.gc_freeze,
             stop_timeout=spec.stop_timeout,
         )
@@ -218,7 +256,8 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
                 pass
         now = time.monotonic()
         watch.arm(now)
-        bus["beat"][BEAT_CHILD] = now
+        hooks.after_command(now)  # the inputs (and heartbeat) the first cycle's tick reads; not a cycle
+        hooks.cycles = 0
         ctl[CTL_PHASE] = PHASE_RUNNING
         stats = loop.run(duration, stop_flag)  # type: ignore[arg-type]
         ctl[CTL_PHASE] = PHASE_DONE

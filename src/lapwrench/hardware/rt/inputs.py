@@ -24,7 +24,7 @@ class _Values:
 class ShmInput:
     """A shared-memory slot seen by :class:`~lapwrench.hardware.runner.ControlLoop` as a
     latest-value buffer (``get_fresh``). :meth:`refresh` reads and checks the slot once per cycle
-    (in the loop's ``pre_cycle``); it returns a message when the slot holds corrupt data."""
+    (in the loop's ``after_command``); it returns a message when the slot holds corrupt data."""
 
     def __init__(
         self, slot: SeqlockSlot, kind: str, clock: Callable[[], float] = time.monotonic, *, registered: bool = False
