@@ -309,6 +309,7 @@ class ControlLoop:
         q_start = np.array(self.last_reading.q if self.last_reading else np.zeros(n))
         cyc, comp, rm, rr, cmds = Growable(), Growable(), Growable(), Growable(), Growable(n)
         robot_t = 0.0
+        rcm_peak = 0.0  # the measured RCM error's maximum over the whole run (the series keep its end)
         stop_deadline: float | None = None
         wall0 = time.perf_counter()
         try:
@@ -329,7 +330,10 @@ class ControlLoop:
                 c = self.cycle()
                 cyc.append(c.period * 1e6)
                 comp.append(c.compute * 1e6)
-                rm.append(c.scope.rcm_error)
+                e = c.scope.rcm_error
+                rm.append(e)
+                if e > rcm_peak or e != e:  # a NaN stays the peak (nothing compares greater than it)
+                    rcm_peak = e
                 rr.append(math.nan if c.result is None else c.result.rcm_error)
                 cmds.append(c.q_cmd)
                 robot_t += dt
@@ -344,11 +348,12 @@ class ControlLoop:
             self._safe_disconnect()
         return LoopStats(
             cycles=cyc.n,
-            cycle_us=cyc.array()[1:],
+            cycle_us=cyc.array()[1:] if not cyc.dropped else cyc.array(),  # the first cycle has no period
             compute_us=comp.array(),
             rcm_error_measured=rm.array(),
             rcm_error_reference=rr.array(),
             commands=cmds.array(),
+            rcm_error_measured_max=rcm_peak if cyc.n else None,
             q_start=q_start,
             p_R=np.array(self._p_R(), dtype=float),
             robot_time=robot_t,
