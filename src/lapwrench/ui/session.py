@@ -49,8 +49,8 @@ KEPT_RECORDS = 10_000  # the closed loop's per-tick lists are trimmed to this ma
 
 def build_loop(cfg: Config, seed: int, detector: str) -> ClosedLoop:
     """A closed loop with ``detector`` (one of :data:`DETECTORS`). With ``projected`` the loop keeps the
-    camera's clock and draws nothing (the page's view renders on its own thread, :mod:`lapwrench.ui.view`)
-    unless live telemetry takes the frames; the shipped YOLO model detects on rendered frames."""
+    camera's clock and draws nothing (the page's view renders on its own thread, :mod:`lapwrench.ui.view`;
+    live telemetry draws the few frames it sends); the shipped YOLO model detects on rendered frames."""
     checked_choice(detector, "detector", DETECTORS)
     closed = ClosedLoop(cfg, seed=seed, detector=detector)
     for i in range(closed.world.n_instruments):

@@ -51,8 +51,8 @@ class _CycleHooks:
     gathered, under 1 ms older. Once before the first cycle too. Each call is timed (:attr:`hook_us`):
     part of the cycle's work, though not of the command's latency.
 
-    :meth:`before_tick` (the loop's ``pre_cycle``): after a late cycle, the F/T drain again
-    (:data:`FT_CATCH_UP_S`); then the F/T sample the tick will read is counted fresh or not.
+    :meth:`before_tick` (the loop's ``pre_cycle``): the cycle counted; after a late cycle, the F/T drain
+    again (:data:`FT_CATCH_UP_S`); then the F/T sample the tick will read is counted fresh or not.
     """
 
     def __init__(self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch) -> None:
@@ -75,6 +75,8 @@ class _CycleHooks:
             self.loop.supervisor.raise_alarm(self.loop.session_time(now), kind, message)
 
     def before_tick(self, now: float) -> None:
+        self.cycles += 1
+        self.ctl[CTL_CYCLES] = self.cycles
         ft = self.ft
         if ft is None:
             return
@@ -93,8 +95,6 @@ class _CycleHooks:
 
     def _after_command(self, now: float) -> None:
         self.beat[BEAT_CHILD] = now
-        self.cycles += 1
-        self.ctl[CTL_CYCLES] = self.cycles
         ft = self.ft
         if ft is not None:
             self.ft_datagrams += ft.drain(now)
@@ -256,8 +256,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
                 pass
         now = time.monotonic()
         watch.arm(now)
-        hooks.after_command(now)  # the inputs (and heartbeat) the first cycle's tick reads; not a cycle
-        hooks.cycles = 0
+        hooks.after_command(now)  # the inputs (and heartbeat) the first cycle's tick reads
         ctl[CTL_PHASE] = PHASE_RUNNING
         stats = loop.run(duration, stop_flag)  # type: ignore[arg-type]
         ctl[CTL_PHASE] = PHASE_DONE
