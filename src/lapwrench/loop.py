@@ -11,9 +11,12 @@ One cycle (:meth:`ControlLoop.cycle`)::
     sources polled; frame = SensorFrame(fresh readings, reading)
     result  = controller.tick(frame)       # an exception here is an alarm: the arm stops to rest
     scope   = measure_scope(model, reading.q, result.p_R)
-    q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, compute time)
+    q       = supervisor.filter(result.q_ref, measured RCM error, depth, ΔF, measured q, busy time)
     robot.command(q)
     after_command(now)                     # the real-time process: F/T drain, shared inputs, peer watch
+
+The hooks (``pre_cycle``, ``after_command``) are guarded like the tick: an exception in one is a
+``hook_error`` alarm (the arm stops to rest), never an escape from the loop.
 
 The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`). The records a
 cycle and a run produce (:class:`Cycle`, :class:`LoopStats`) live in :mod:`lapwrench.loop_stats`
@@ -21,10 +24,11 @@ and are importable from here.
 
 Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is
 ``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
-the compute time of every cycle is checked against the supervisor's budget (deadline misses,
-and an alarm after too many in a row). In simulation the clock is the simulated time: the
-simulated robot waits for the loop, so the compute time is measured and reported but has no
-deadline (``wall_deadlines=False``).
+every cycle's busy time is checked against the supervisor's budget (deadline misses, and an alarm
+after too many in a row): its compute time (state read to command computed) plus the loop's own work
+after the previous command (the filter, ``after_command``; not the robot's ``command``), which all
+delays the next read. In simulation the clock is the simulated time: the simulated robot waits for
+the loop, so the compute time is measured and reported but has no deadline (``wall_deadlines=False``).
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ class ControlLoop:
         supervisor: The safety supervisor every command passes through.
         sources: The controller's inputs (:class:`~lapwrench.sources.Source`), at most one per kind.
         clock: The loop's clock in seconds (default ``time.monotonic``; the simulation passes its time).
-        wall_deadlines: Check each cycle's compute time against the supervisor's budget (real robots).
+        wall_deadlines: Check each cycle's busy time against the supervisor's budget (real robots).
         on_cycle: Called with each :class:`Cycle` after the command was sent (logging, recording).
         on_events: Called with the supervisor's events raised outside a cycle (end of a run,
             robot errors, disconnection).
@@ -70,7 +74,7 @@ class ControlLoop:
         after_command: Called with the cycle's clock time right after ``robot.command``, outside the
             compute time: work the command does not wait for, in the slack before the next state (the
             real-time process drains the F/T socket, reads its shared inputs and checks its peers
-            there, for the next cycle's tick).
+            there, for the next cycle's tick). Its time counts in the next cycle's busy time.
         before_command: Called with the session time just before ``robot.command`` (the simulation
             applies its scripted forces there).
         stop_timeout: Robot seconds allowed for the final stop to come to rest.
@@ -125,6 +129,8 @@ class ControlLoop:
         self._fresh: dict[str, bool] = {}
         self._t_prev: float | None = None
         self._controller_failed = False
+        self._hooks_failed: set[str] = set()
+        self._tail = 0.0  # the loop's own work after the previous cycle's compute (s): filter, after_command
         self._started = False
         self.last_result: TickResult | None = None
         self.last_reading: RobotReading | None = None
@@ -161,7 +167,7 @@ class ControlLoop:
         t_read = time.perf_counter()
         now = self.clock()
         if self.pre_cycle is not None:
-            self.pre_cycle(now)
+            self._hook("pre_cycle", self.pre_cycle, now)
         frame = self._frame(now - self.t0, reading)
         result = self._tick(frame)
         if result is not None:
@@ -177,7 +183,8 @@ class ControlLoop:
         if self.compute_hook is not None:
             self.compute_hook(self.k)
         compute = time.perf_counter() - t_read
-        if compute > sup.cfg.cycle_budget:
+        busy = compute + self._tail
+        if busy > sup.cfg.cycle_budget:
             self.over_budget += 1
         q_cmd = sup.filter(
             frame.time,
@@ -186,14 +193,17 @@ class ControlLoop:
             depth=scope.depth,
             residual=residual,
             q_measured=reading.q,
-            compute_time=compute if self.wall_deadlines else None,
+            compute_time=busy if self.wall_deadlines else None,
             controller_stopping=result is not None and result.rcm_infeasible,
         )
         if self.before_command is not None:
             self.before_command(frame.time)
+        t_command = time.perf_counter()
         self.robot.command(q_cmd)
+        t_after = time.perf_counter()
         if self.after_command is not None:
-            self.after_command(now)
+            self._hook("after_command", self.after_command, now)
+        self._tail = (t_command - t_read - compute) + (time.perf_counter() - t_after)
         period = 0.0 if self._t_prev is None else t_read - self._t_prev
         self._t_prev = t_read
         out = Cycle(self.k, frame, reading, result, scope, q_cmd, compute, period, sup.drain_events())
@@ -216,6 +226,19 @@ class ControlLoop:
         self.k += 1
         return q_cmd
 
+    def _hook(self, name: str, hook: Callable[[float], None], now: float) -> None:
+        """``hook(now)``; its first exception is a ``hook_error`` alarm (the arm stops to rest), later ones are
+        counted events. It is still called every cycle (the real-time process's heartbeat lives there)."""
+        try:
+            hook(now)
+        except Exception as exc:
+            message = f"{name}: {type(exc).__name__}: {exc}"
+            if name in self._hooks_failed:
+                self.supervisor.counted_event(self.session_time(now), "hook_error", message)
+            else:
+                self._hooks_failed.add(name)
+                self.supervisor.raise_alarm(self.session_time(now), "hook_error", message)
+
     def _p_R(self) -> Vec:
         rcm = self.controller.rcm
         if rcm is not None:
@@ -224,11 +247,8 @@ class ControlLoop:
         return self.last_result.p_R
 
     def _tick(self, frame: SensorFrame) -> TickResult | None:
-        """The controller's tick; an exception becomes a supervisor alarm (None), never a crash.
-
-        After a failed tick the controller is not called again in this run: the supervisor's stop
-        brings the arm to rest.
-        """
+        """The controller's tick; an exception becomes a supervisor alarm (None), never a crash. After a
+        failed tick the controller is not called again in this run: the supervisor's stop brings the arm to rest."""
         if self._controller_failed:
             return None
         try:

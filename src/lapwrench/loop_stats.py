@@ -92,7 +92,9 @@ class Growable:
         self._filled = 0  # rows in the last chunk
 
     def _new(self) -> np.ndarray:
-        return np.zeros((self.chunk, self.width) if self.width else self.chunk)
+        # empty, not zeros: every row is written before it is read, and zeros can memset the whole chunk in the
+        # loop's slack (about 1 MB: 21 us p50 and 604 us at worst in 200 tries, against 1.4 and 16 us)
+        return np.empty((self.chunk, self.width) if self.width else self.chunk)
 
     def append(self, x: Any) -> None:
         if self._filled == self.chunk:

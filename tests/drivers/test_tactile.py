@@ -84,6 +84,14 @@ def test_decode_rejects_bad_frames() -> None:
     raw[2:4] = (2000).to_bytes(2, "little")
     with pytest.raises(PacketError, match="max_value"):
         fmt16.decode(raw)
+    fmt8 = TactileFrameFormat(checksum="sum8", max_value=100)  # a cap below what one byte holds
+    with pytest.raises(ValueError):
+        fmt8.encode(np.full(64, 200))
+    raw8 = bytearray(fmt8.encode(np.full(64, 100)))
+    raw8[2] = 200  # one element over the cap, the checksum made to match
+    raw8[-1] = (raw8[-1] + 100) % 256
+    with pytest.raises(PacketError, match="element value 200 > max_value 100"):
+        fmt8.decode(raw8)
 
 
 def test_format_validation() -> None:

@@ -189,7 +189,7 @@ def test_deadline_misses_are_all_counted_but_rate_limited_in_the_log(limits: Joi
         s.filter(k * DT, DEFAULT_Q0, compute_time=0.001)
     assert s.deadline_misses == 1500 and s.consecutive_misses == 1500 and not s.alarm
     logged = [e.message for e in s.events if e.kind == "deadline_miss"]
-    assert len(logged) == 11 and logged[-1] == "cycle compute 1000 us > 500 us (occurrence 1000)"
+    assert len(logged) == 11 and logged[-1] == "cycle busy time 1000 us > 500 us (occurrence 1000)"
     s.filter(2.0, DEFAULT_Q0, compute_time=0.0001)
     assert s.consecutive_misses == 0 and s.deadline_misses == 1500
 

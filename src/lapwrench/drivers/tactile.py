@@ -181,7 +181,7 @@ class TactileFrameFormat:
             if got != want:
                 raise PacketError(f"{self.checksum.value} checksum mismatch: got {got.hex()}, want {want.hex()}")
         values = np.frombuffer(payload, dtype=self.dtype).astype(self.dtype.newbyteorder("="))
-        if self.element_width > 1 and int(values.max()) > self.max_value:
+        if int(values.max()) > self.max_value:  # 1-byte elements too: a format may cap them below 255
             raise PacketError(f"element value {int(values.max())} > max_value {self.max_value}")
         return values
 

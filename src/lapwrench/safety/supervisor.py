@@ -223,7 +223,8 @@ class SafetySupervisor(SupervisorWatches):
             residual: ΔF (eq 19, N, 3-vector): handle F/T minus the robot's external force estimate;
                 |ΔF| over ``max_residual_force`` → hold. None when either sensor is unavailable.
             q_measured: The robot's measured joints (rad): near a limit or not finite → hold.
-            compute_time: This cycle's compute time (s); None skips the deadline watch.
+            compute_time: This cycle's busy time (s; :class:`~lapwrench.loop.ControlLoop`: its compute time plus
+                the loop's own work after the previous command); None skips the deadline watch.
             controller_stopping: The controller could not keep the RCM task inside the joint limits
                 and is braking its reference to rest while keeping the task as far as it can
                 (``TickResult.rcm_infeasible``): its commands pass until they are at rest (or for

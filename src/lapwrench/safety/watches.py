@@ -179,7 +179,7 @@ class SupervisorWatches:
             self.deadline_misses += 1
             self.consecutive_misses += 1
             self.counted_event(
-                time, "deadline_miss", f"cycle compute {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
+                time, "deadline_miss", f"cycle busy time {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
             )
             if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
                 self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")

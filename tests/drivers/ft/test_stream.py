@@ -248,6 +248,42 @@ def test_drain_reads_everything_pending_and_publishes_only_the_newest(peer: RawP
     assert not s.polled
 
 
+def test_a_backlog_drained_late_is_stamped_when_it_arrived_not_when_it_was_read(peer: RawPeer) -> None:
+    """After a stall, what waited in the socket is as old as it is: a sample drained 150 ms after it came is
+    not fresh (before, it was stamped with the drain's time; after a stall longer than the socket holds,
+    the kernel keeps the oldest datagrams, so that made data hundreds of ms old look new)."""
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        for i in range(2, 12):
+            peer.send(pack_record(i, i, 0, [10000 * i, 0, 0, 0, 0, 0]))
+        sent = time.monotonic()
+        time.sleep(0.15)
+        assert s.drain() == 10
+        sample = s.latest()
+        np.testing.assert_allclose(sample.value.force, [11.0, 0.0, 0.0])
+        assert sample.timestamp <= sent + 0.01  # arrived about when sent, not when drained
+        assert not s.fresh(max_age=0.02)
+    finally:
+        s.stop()
+
+
+def test_drain_reads_at_most_its_budget_and_leaves_the_rest_queued(peer: RawPeer) -> None:
+    """A flood cannot hold the caller: ``max_datagrams`` bounds one drain; the next drain reads on."""
+    peer.answer_start().join(0)
+    s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()
+    try:
+        for i in range(2, 42):
+            peer.send(b"\x00" * 20 if i % 2 else pack_record(i, i, 0, [10000, 0, 0, 0, 0, 0]))  # half junk
+        time.sleep(0.05)
+        assert s.drain(max_datagrams=16) == 16
+        assert s.drain(max_datagrams=16) == 16
+        assert s.drain(max_datagrams=16) == 8
+        assert s.status().malformed == 20
+    finally:
+        s.stop()
+
+
 def test_drain_skips_malformed_and_status_error_records_and_keeps_the_newest_valid(peer: RawPeer) -> None:
     peer.answer_start().join(0)
     s = OnRobotHexSensor("127.0.0.1", peer.port).start_polled()

@@ -63,3 +63,33 @@ def test_a_peer_that_exits_is_named_at_once(sleeper: subprocess.Popen[bytes]) ->
     assert hit == (f"parent process (pid {sleeper.pid}) exited", peer)
     watch.close()
     watch.close()  # idempotent
+
+
+def test_after_an_exited_peer_is_forgotten_the_others_are_watched_again(sleeper: subprocess.Popen[bytes]) -> None:
+    """The child forgets a peer once it has reported it; the watch then goes on checking the rest (before,
+    the exited peer's pidfd stayed in the poll and was reported every cycle, hiding the others' hangs)."""
+    beats = np.zeros(8)
+    gone = PeerSpec("detector", beat=2, timeout=10.0, pid=sleeper.pid)
+    feeder = PeerSpec("feeder", beat=0, timeout=0.05)
+    watch = PeerWatch(beats, [gone, feeder])
+    now = time.monotonic()
+    watch.arm(now)
+    beats[0] = beats[2] = now
+    sleeper.kill()
+    sleeper.wait()
+    hit = watch.check(now)
+    assert hit is not None and hit[1] is gone
+    watch.forget(gone)
+    assert watch.check(now) is None  # the detector is not named again
+    hit = watch.check(now + 0.2)  # the feeder stops beating: noticed
+    assert hit is not None and hit[1] is feeder
+    watch.close()
+
+
+def test_a_peer_gone_before_the_watch_starts_is_named_at_the_first_check(sleeper: subprocess.Popen[bytes]) -> None:
+    sleeper.kill()
+    sleeper.wait()
+    peer = PeerSpec("parent", beat=0, timeout=10.0, pid=sleeper.pid)
+    watch = PeerWatch(np.zeros(8), [peer])
+    assert watch.check(time.monotonic()) == (f"parent process (pid {sleeper.pid}) exited", peer)
+    watch.close()

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from lapwrench.drivers import arrival
 from lapwrench.drivers.base import DeviceTimeoutError, PacketError
 from lapwrench.drivers.ft.stream import TareCollector, UdpRecordStream
 from lapwrench.drivers.ft.wire import CMD_START_REALTIME, FTRecord, Wrench, named_wrench
@@ -74,12 +75,15 @@ class UdpForceTorqueSensor(UdpRecordStream):
             raise
 
     def drain(self, now: float | None = None, max_datagrams: int = 1024) -> int:
-        """Read every pending datagram without blocking; publish the newest valid one.
+        """Read the pending datagrams without blocking, at most ``max_datagrams``; publish the newest valid one.
 
         Every datagram goes through the same checks as in the thread mode (sequence accounting,
         status word, tare collection; malformed ones are counted); only the newest valid record
-        is published, stamped ``now`` (default ``time.monotonic()``): the time it was taken off
-        the socket, at most one drain period after it arrived. Returns the number of datagrams
+        is published, stamped with its arrival time (the kernel's receive stamp,
+        :mod:`lapwrench.drivers.arrival`) on the clock of ``now`` (default ``time.monotonic()``; ``now``
+        must be that clock's current time): a backlog read after a stall is as old as it is. Without a
+        kernel stamp, the time it was taken off the socket. What ``max_datagrams`` leaves stays queued for
+        the next drain (a flood of datagrams cannot hold the caller). Returns the number of datagrams
         read. Never raises on I/O: an error (e.g. ICMP port unreachable) is counted and the data
         goes stale.
         """
@@ -87,10 +91,11 @@ class UdpForceTorqueSensor(UdpRecordStream):
         if sock is None:
             return 0
         newest: tuple[list[float], FTRecord] | None = None
+        stamp: float | None = None
         n = 0
         while n < max_datagrams:
             try:
-                data = sock.recv(2048)
+                data, arrived = self._recv(sock)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as exc:
@@ -103,9 +108,10 @@ class UdpForceTorqueSensor(UdpRecordStream):
                 self._record_malformed(exc)
                 continue
             if accepted is not None:
-                newest = accepted
+                newest, stamp = accepted, arrived
         if newest is not None:
-            self._publish_raw(*newest, time.monotonic() if now is None else now)
+            t = time.monotonic() if now is None else now
+            self._publish_raw(*newest, arrival.on_clock(stamp, t, time.time()))
         return n
 
     poll = drain

@@ -3,8 +3,9 @@
 Each accepted record is published as a :class:`~lapwrench.drivers.ft.wire.Wrench` with named parts
 (force (3,) N, torque (3,) N·m, sensor frame, bias removed) in a
 :class:`~lapwrench.buffer.LatestValue`; the sample timestamp is the host ``time.monotonic()`` at
-reception. Malformed datagrams (wrong length, a request header where a record is expected, non-zero
-status, a wrench beyond any sensor's range) raise :class:`~lapwrench.drivers.base.PacketError`
+the datagram's arrival (the kernel's receive stamp, :mod:`lapwrench.drivers.arrival`: a datagram read
+late is stamped as old as it is). Malformed datagrams (wrong length, a request header where a record
+is expected, non-zero status, a wrench beyond any sensor's range) raise :class:`~lapwrench.drivers.base.PacketError`
 inside the reader thread, where they are counted and reported without stopping the thread.
 Sequence numbers go through the source's :class:`~lapwrench.buffer.RateMonitor`.
 UDP has no retransmission: the start command is re-sent until data arrives (like the public
@@ -22,6 +23,7 @@ import time
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from lapwrench.drivers import arrival
 from lapwrench.drivers.base import DeviceOpenError, DeviceTimeoutError, PacketError, StreamingSource
 from lapwrench.drivers.ft.wire import (
     CMD_START_REALTIME,
@@ -111,6 +113,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
         self._bias = [0.0] * 6  # N, N m (WIRE_ORDER), as floats: subtracted from every record's six floats
         self._tare: TareCollector | None = None
         self._polled = False
+        self._kernel_stamps = False  # the socket's datagrams carry the kernel's arrival stamp
         self.last_status = 0
         """Most recent non-zero device status word (0 if none was seen)."""
 
@@ -132,6 +135,7 @@ class UdpRecordStream(StreamingSource[Wrench]):
             sock.close()
             raise DeviceOpenError(self.device, f"cannot reach device: {exc}") from exc
         sock.settimeout(self.recv_timeout)
+        self._kernel_stamps = arrival.enable(sock)
         self._sock = sock
 
     def _close(self) -> None:
@@ -202,11 +206,16 @@ class UdpRecordStream(StreamingSource[Wrench]):
         if sock is None:
             raise RuntimeError("socket closed")
         try:
-            data = sock.recv(2048)
+            data, stamp = self._recv(sock)
         except TimeoutError:
             return
-        now = time.monotonic()
-        self._handle_datagram(data, now)
+        self._handle_datagram(data, arrival.on_clock(stamp, time.monotonic(), time.time()))
+
+    def _recv(self, sock: socket.socket) -> tuple[bytes, float | None]:
+        """One datagram and its kernel arrival stamp (wall clock; None without one)."""
+        if self._kernel_stamps:
+            return arrival.recv_stamped(sock, 2048)
+        return sock.recv(2048), None
 
     def _handle_datagram(self, data: bytes, now: float) -> None:
         accepted = self._accept_datagram(data)

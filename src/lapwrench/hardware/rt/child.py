@@ -40,7 +40,16 @@ FT_CATCH_UP_S = 0.005
 """A cycle that starts more than this after the last F/T drain (the previous cycle came late: a stall of
 the robot's side) drains the socket again before its tick, so the F/T data a tick reads is never more
 than this older than a drain at the tick would give (a quarter of the default 20 ms maximum age, well
-inside the box's own filter delay for a hand's push)."""
+inside the box's own filter delay for a hand's push). At control rates under 1 kHz, five cycle periods."""
+
+FT_DRAIN_BUDGET = 32
+"""Datagrams the drain after each command reads at most (a 1 kHz box sends one a cycle). A flood from the
+box's address (junk costs about 5 µs a datagram to reject) holds a cycle for a bounded time; the rest
+stays queued, and what is published carries its arrival stamp, so a backlog reads as stale."""
+
+FT_CATCH_UP_BUDGET = 256
+"""Datagrams the catch-up drain after a late cycle reads at most: about what the socket's default buffer
+holds (the kernel drops what comes beyond), so the tick after a stall reads the newest record there is."""
 
 
 class _CycleHooks:
@@ -55,7 +64,9 @@ class _CycleHooks:
     again (:data:`FT_CATCH_UP_S`); then the F/T sample the tick will read is counted fresh or not.
     """
 
-    def __init__(self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch) -> None:
+    def __init__(
+        self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch, dt: float = 0.001,
+    ) -> None:
         self.ctl, self.beat = bus["ctl"], bus["beat"]
         self.ft, self.ft_max_age = ft, ft_max_age
         self.inputs = inputs
@@ -68,6 +79,7 @@ class _CycleHooks:
         self.fault: str | None = None
         self.hook_us = Growable()  # the time each after_command took (µs)
         self._drained_at = -math.inf
+        self._catch_up_s = max(FT_CATCH_UP_S, 5.0 * dt)
 
     def _alarm(self, now: float, kind: str, message: str) -> None:
         if self.fault is None:
@@ -80,9 +92,8 @@ class _CycleHooks:
         ft = self.ft
         if ft is None:
             return
-        if now - self._drained_at > FT_CATCH_UP_S:
-            self.ft_datagrams += ft.drain(now)
-            self._drained_at = now
+        if now - self._drained_at > self._catch_up_s:
+            self._drain(ft, FT_CATCH_UP_BUDGET)
             self.ft_catch_ups += 1
         s = ft.buffer.get()
         if s is not None and now - s.timestamp <= self.ft_max_age:
@@ -93,12 +104,17 @@ class _CycleHooks:
         self._after_command(now)
         self.hook_us.append((time.perf_counter() - t0) * 1e6)
 
+    def _drain(self, ft: Any, budget: int) -> None:
+        """The F/T socket drained (at most ``budget`` datagrams), its newest record stamped with its arrival
+        on the loop's clock (``time.monotonic``), not with the cycle's time."""
+        self.ft_datagrams += ft.drain(max_datagrams=budget)
+        self._drained_at = time.monotonic()
+
     def _after_command(self, now: float) -> None:
         self.beat[BEAT_CHILD] = now
         ft = self.ft
         if ft is not None:
-            self.ft_datagrams += ft.drain(now)
-            self._drained_at = now
+            self._drain(ft, FT_DRAIN_BUDGET)
         for inp in self.inputs.values():
             problem = inp.refresh(now)
             if problem is not None:
@@ -112,7 +128,7 @@ class _CycleHooks:
                     inp.kill()
             kind = "peer_died" if "exited" in message else "peer_hung"
             self._alarm(now, kind, f"{message}; its inputs are stale")
-            self.watch.peers = [p for p in self.watch.peers if p is not peer]
+            self.watch.forget(peer)
 
     def report(self) -> dict[str, Any]:
         return {
@@ -217,7 +233,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
         for name, _, _ in spec.inputs:  # registered inputs the cues ask for, fed by the parent
             inputs[input_slot(name)] = ShmInput(bus.slot(input_slot(name)), name, registered=True)
         watch = PeerWatch(bus["beat"], peers)
-        hooks = _CycleHooks(bus, ft, spec.ages.ft, inputs, watch)
+        hooks = _CycleHooks(bus, ft, spec.ages.ft, inputs, watch, spec.cfg.robot.dt)
         sources = Sources(
             ft=None if ft is None else ft.buffer, tactile=inputs.get("tactile"), instruments=inputs.get("instruments"),
             extra={name: (inputs[input_slot(name)], max_age) for name, _, max_age in spec.inputs},

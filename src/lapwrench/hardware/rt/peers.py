@@ -37,14 +37,11 @@ class PeerWatch:
                 continue
             try:
                 fd = os.pidfd_open(p.pid)
-            except (AttributeError, OSError):  # no pidfd (old kernel) or already gone
-                if _pid_alive(p.pid):
-                    self._kill_check.append(p)
-                    continue
-                fd = -1
-            if fd >= 0:
-                self._fd_peer[fd] = p
-                self._poll.register(fd, select.POLLIN)
+            except (AttributeError, OSError):  # no pidfd (old kernel) or already gone: checked by kill(pid, 0),
+                self._kill_check.append(p)  # which reports a peer gone already at its first check
+                continue
+            self._fd_peer[fd] = p
+            self._poll.register(fd, select.POLLIN)
         self.armed_at = time.monotonic()
 
     def arm(self, now: float) -> None:
@@ -65,6 +62,17 @@ class PeerWatch:
                 age = now - float(self.beats[p.beat]) if self.beats[p.beat] > 0 else math.inf
                 return f"no heartbeat from the {p.name} for {age * 1e3:.0f} ms (> {p.timeout * 1e3:.0f} ms): hung", p
         return None
+
+    def forget(self, peer: PeerSpec) -> None:
+        """Stop watching ``peer`` (reported already): the others are checked again from the next cycle."""
+        self.peers = [p for p in self.peers if p is not peer]
+        self._kill_check = [p for p in self._kill_check if p is not peer]
+        for fd, p in list(self._fd_peer.items()):
+            if p is peer:
+                self._poll.unregister(fd)
+                del self._fd_peer[fd]
+                with contextlib.suppress(OSError):
+                    os.close(fd)
 
     def close(self) -> None:
         for fd in self._fd_peer:
