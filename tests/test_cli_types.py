@@ -54,3 +54,12 @@ def test_output_path_checks_create_nothing(tmp_path: Path) -> None:
     assert cli_types.writable_file_problem("") == "is empty"
     assert "NUL" in (cli_types.writable_file_problem("a\0b") or "")
     assert "not a usable path" in (cli_types.writable_file_problem(tmp_path / ("x" * 5000)) or "")
+    assert sorted(tmp_path.iterdir()) == [blocker]  # the probes left nothing behind
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_pseudo_filesystem_is_no_place_for_an_output_even_for_root() -> None:
+    """Root passes every permission check, so ``os.access`` says /proc is writable; a probe file says
+    it is not (before, ``run --log /proc/x.mcap`` failed with a traceback after the simulator started)."""
+    assert "not writable" in (cli_types.writable_file_problem("/proc/x.mcap") or "")
+    assert "not writable" in (cli_types.writable_dir_problem("/proc/run-out") or "")

@@ -66,6 +66,8 @@ def test_bad_values_name_the_key(data: dict, key: str) -> None:
 def test_bad_files(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="not found"):
         load(tmp_path / "missing.yaml")
+    with pytest.raises(ConfigError, match="config file name is empty"):  # not "config file  is a directory"
+        load("")
     bad = tmp_path / "bad.yaml"
     bad.write_text("rcm: [unclosed\n")
     with pytest.raises(ConfigError, match="not valid YAML"):

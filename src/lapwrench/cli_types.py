@@ -17,6 +17,7 @@ import math
 import os
 import re
 import socket
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
@@ -259,13 +260,13 @@ def _path_problem(path: str | os.PathLike[str], check: Callable[[Path], str | No
 
 
 def writable_dir_problem(path: str | os.PathLike[str]) -> str | None:
-    """Why a folder could not be created or written at ``path`` (``None`` if it can), without
-    creating anything."""
+    """Why a folder could not be created or written at ``path`` (``None`` if it can), leaving nothing
+    behind (a nameless temporary file probes the folder)."""
     return _path_problem(path, _dir_problem)
 
 
 def writable_file_problem(path: str | os.PathLike[str]) -> str | None:
-    """Why a file could not be written at ``path`` (``None`` if it can), without creating anything.
+    """Why a file could not be written at ``path`` (``None`` if it can), leaving nothing behind.
 
     A folder given for a file, a parent that is a file, or an unwritable file or folder is a problem;
     missing parent folders are fine when they can be created.
@@ -273,15 +274,27 @@ def writable_file_problem(path: str | os.PathLike[str]) -> str | None:
     return _path_problem(path, _file_problem)
 
 
+def _writable(folder: Path) -> bool:
+    """Whether files can be made in ``folder``: its permissions, then a nameless temporary file made and
+    dropped there (root passes every permission check, but /proc, /sys and read-only mounts refuse files)."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return False
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
 def _dir_problem(p: Path) -> str | None:
     if p.exists():
         if not p.is_dir():
             return "is a file, not a folder"
-        return None if os.access(p, os.W_OK | os.X_OK) else "is not writable"
+        return None if _writable(p) else "is not writable"
     base = _nearest_existing(p.absolute())
     if not base.is_dir():
         return f"cannot be created: {quote(str(base))} is not a folder"
-    if not os.access(base, os.W_OK | os.X_OK):
+    if not _writable(base):
         return f"cannot be created: {quote(str(base))} is not writable"
     return None
 

@@ -340,6 +340,8 @@ def presets() -> list[str]:
 
 def _resolve(path: str | Path) -> Path:
     """The file behind a config argument: the path itself, or the packaged preset of that name."""
+    if str(path) == "":
+        raise ConfigError("config file name is empty (give a YAML file or a preset: " + ", ".join(presets()) + ")")
     p = Path(path)
     try:
         exists = p.exists()

@@ -109,6 +109,22 @@ def test_a_truncated_log_is_read_as_far_as_it_goes(
     assert summary["cycles"] == n and summary["truncated"]["missing"] == log.truncated.missing
 
 
+def test_a_damaged_chunk_in_a_complete_log_is_corruption_not_data(
+    long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same for a complete file (read through its summary): the chunk CRCs are checked, so one flipped
+    bit is refused rather than read as a joint angle of 1e-226."""
+    full, _ = long_log
+    data = bytearray(full.read_bytes())
+    data[chunk_offsets(full)[1] + 500] ^= 0x01
+    path = tmp_path / "flipped.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(LogFileError, match="corrupt"):
+        load_log(path)
+    code, out, err = report(path, tmp_path / "report", capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "corrupt" in err and not out
+
+
 def test_a_damaged_chunk_in_a_truncated_log_is_corruption_not_data(
     long_log: tuple[Path, list[dict[str, Any]]], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

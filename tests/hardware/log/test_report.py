@@ -73,6 +73,20 @@ def test_the_command_line_reports_a_truncated_log_and_refuses_a_foreign_one(
         assert "Traceback" not in proc.stdout + proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize("out", ["", "a-file"])
+def test_a_bad_out_folder_is_refused_before_the_log_is_read(out: str, tmp_path: Path) -> None:
+    """``--out ''`` used to write the plots into the current folder, and a file as ``--out`` was found only
+    after the whole log had been read."""
+    (tmp_path / "a-file").write_text("x")
+    script = "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))"
+    proc = subprocess.run(
+        [sys.executable, "-c", script, "log-report", str(tmp_path / "missing.mcap"), "--out", out],
+        capture_output=True, text=True, timeout=120, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 2 and "argument --out" in proc.stderr and "missing.mcap" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]
+
+
 def test_the_report_plots_the_cues_telemetry_and_lists_its_fields(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

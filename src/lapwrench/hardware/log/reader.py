@@ -236,7 +236,7 @@ def iter_messages(
     decoder = _Decoder()
     try:
         with p.open("rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)  # a flipped bit in a chunk is corruption, not data
             for schema, channel, message in reader.iter_messages(
                 topics=None if topics is None else list(topics), log_time_order=True
             ):
@@ -284,7 +284,7 @@ def log_topics(path: str | Path) -> dict[str, TopicInfo]:
     p = check_log_file(path)
     try:
         with p.open("rb") as f:
-            summary = make_reader(f).get_summary()
+            summary = make_reader(f, validate_crcs=True).get_summary()
     except Exception as exc:  # mcap, struct: the summary section is bad
         raise LogFileError(f"{p}: corrupt MCAP summary ({type(exc).__name__}: {exc})") from exc
     if summary is None:

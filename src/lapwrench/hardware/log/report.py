@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from lapwrench.cli_types import output_dir
 from lapwrench.hardware.log.reader import LogContents, LogFileError, load_log
 from lapwrench.hardware.log.topics import CYCLE_TOPIC
 
@@ -246,4 +247,5 @@ def log_report_main(args: argparse.Namespace) -> int:
 def add_log_report_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``lapwrench log-report``."""
     parser.add_argument("log", help="an MCAP run log (lapwrench run --log)")
-    parser.add_argument("--out", default="log-report", help="folder for the PNG plots")
+    parser.add_argument("--out", default="log-report", type=output_dir,
+                        help="folder for the PNG plots (checked before the log is read)")
