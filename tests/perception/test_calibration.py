@@ -101,6 +101,8 @@ def test_bad_inputs(views, tmp_path):
         calibrate_from_images([], board=BOARD)
     with pytest.raises(CalibrationError, match="not found"):
         calibrate_from_images([tmp_path / "missing.png"], board=BOARD)
+    with pytest.raises(CalibrationError, match="not a file"):  # a folder is there, not missing
+        calibrate_from_images([tmp_path], board=BOARD)
     junk = tmp_path / "junk.png"
     junk.write_bytes(b"nope")
     with pytest.raises(CalibrationError, match="not a readable image"):

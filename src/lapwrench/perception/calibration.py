@@ -110,7 +110,7 @@ def _load_gray(src: ImageSource, label: str) -> np.ndarray:
     else:
         path = Path(src)
         if not path.is_file():
-            raise CalibrationError(f"{label}: image file not found")
+            raise CalibrationError(f"{label}: {'not a file' if path.exists() else 'image file not found'}")
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if img is None:
             raise CalibrationError(f"{label}: not a readable image")
