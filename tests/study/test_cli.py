@@ -40,6 +40,11 @@ STUDY = {"name": "cli", "scenarios": ["grip"], "seeds": 1, "time_scale": 0.05, "
         (["sweep", "{good}", "--save-every", "nan"], "--save-every"),
         (["sweep", "{good}", "--save-every", "inf"], "--save-every"),
         (["sweep", "{good}", "--save-every", "soon"], "--save-every"),
+        (["sweep", "{normal}"], "give it a min inside the key's range"),
+        (["tune", "{normal_tune}"], "give it a min inside the key's range"),
+        (["sweep", "{garbage}"], "cannot load as an ONNX model"),
+        (["sweep", "{escape}"], "plain folder name"),
+        (["sweep", "{good}", "--out", "{other_study}"], "holds the results of study 'another'"),
         (["tune", "{good}"], "'search' must map parameter keys"),
         (["tune", "/no/such/tune.yaml"], "tuning file not found"),
     ],
@@ -51,7 +56,16 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capture
         "bad": str(_write(tmp_path / "bad.yaml", {**STUDY, "scenarios": ["nope"]})),
         "good": str(_write(tmp_path / "good.yaml", STUDY)),
         "file": str(_write(tmp_path / "afile", "x")),
+        "normal": str(_write(tmp_path / "normal.yaml", {**STUDY, "sample": {"rcm.Kp": {"normal": [300, 1000]}}})),
+        "normal_tune": str(_write(tmp_path / "normal_tune.yaml", {
+            **STUDY, "search": {"rcm.Kp": {"normal": [300, 1000]}}, "objective": {"metric": "completion_time_s"}})),
+        "garbage": str(_write(tmp_path / "garbage.yaml", {**STUDY, "detector": str(tmp_path / "garbage.onnx")})),
+        "escape": str(_write(tmp_path / "escape.yaml", {**STUDY, "name": "../../etc/x"})),
+        "other_study": str(tmp_path / "other"),
     }
+    (tmp_path / "garbage.onnx").write_bytes(bytes(range(256)) * 12)
+    (tmp_path / "other").mkdir()
+    _write(tmp_path / "other" / "study.yaml", {**STUDY, "name": "another"})
     argv = [a.format(**paths) for a in argv]
     try:
         code = main(argv)
@@ -138,3 +152,27 @@ def test_tiny_tuning_run_writes_a_preset_that_loads_and_passes(tmp_path: Path) -
     assert 120.0 <= best.viscous.k_t <= 180.0
     report = (out / "tune_report.md").read_text()
     assert "2 of 2 trials met every constraint" in report and (out / "tune_tradeoff.png").exists()
+
+
+@pytest.mark.slow
+def test_tune_interrupted_exits_130_and_writes_no_result(tmp_path: Path) -> None:
+    """Ctrl-C to the whole process group (as a terminal sends it) while trials run: exit 130, one line saying
+    so, and no best.yaml, trials table or report presented as the search's result."""
+    tune_file = _write(tmp_path / "tune.yaml", {
+        **STUDY, "name": "ctrl-c", "trials": 8, "search": {"rcm.Kp": {"uniform": [300.0, 3000.0]}},
+        "objective": {"metric": "completion_time_s"}})
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "lapwrench.cli", "tune", str(tune_file), "--out", str(out),
+                             "--workers", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True)
+    trials_dir = out / "ray_tune" / "ctrl-c"
+    deadline = time.monotonic() + 240  # interrupt once Tune has started its trials
+    while proc.poll() is None and time.monotonic() < deadline and not any(trials_dir.glob("*/params.json")):
+        time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 130, err[-2000:]
+    assert "lapwrench tune: interrupted" in err and "Traceback" not in err
+    assert not (out / "best.yaml").exists() and not (out / "trials.parquet").exists()
+    assert not (out / "tune_report.md").exists()

@@ -20,7 +20,8 @@ import pytest
 import yaml
 
 from lapwrench.study.runner import ClusterError, check_reachable, run_study, start_ray
-from lapwrench.study.spec import from_dict
+from lapwrench.study.spec import StudyError, from_dict
+from lapwrench.study.table import ResultTable
 
 pytestmark = pytest.mark.slow
 
@@ -192,3 +193,18 @@ def test_a_running_ray_refuses_address_and_workers_and_a_bad_save_interval(tmp_p
         with pytest.raises(ValueError, match="save_every_s must be a finite number > 0"):
             run_study(spec, tmp_path, progress=False, save_every_s=bad)
     assert not (tmp_path / "runs.parquet").exists()  # refused before anything ran
+
+
+def test_a_table_of_another_study_is_refused_before_ray_starts(tmp_path: Path) -> None:
+    """Rows of two studies would mix in the report: the folder is refused, nothing is run or rewritten."""
+    import sys as system
+
+    table = ResultTable(tmp_path)
+    table.add([{"run_id": "0" * 16, "study": "other", "scenario": "grip", "status": "ok"}])
+    table.save()
+    before = (tmp_path / "runs.parquet").read_bytes()
+    ray_before = "ray" in system.modules and system.modules["ray"].is_initialized()
+    with pytest.raises(StudyError, match="holds rows of study 'other', not 'small'"):
+        run_study(from_dict(STUDY), tmp_path, progress=False)
+    assert (tmp_path / "runs.parquet").read_bytes() == before
+    assert ("ray" in system.modules and system.modules["ray"].is_initialized()) == ray_before

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from lapwrench import config as config_mod
 from lapwrench.sim.variation import WorldVariation
-from lapwrench.study.space import Dist, SpaceError, apply, check_key, parse_dist
+from lapwrench.study.space import Dist, SpaceError, apply, check_dist, check_key, parse_dist
 
 PROP = settings(derandomize=True, database=None, deadline=None, max_examples=60)
 BASE = config_mod.load(None)
@@ -304,3 +304,17 @@ def test_an_accepted_dist_can_always_draw(spec: dict) -> None:
     except SpaceError:
         return
     d.draw(np.random.default_rng(0))
+
+
+def test_check_dist_refuses_an_unclipped_normal_side_that_reaches_out_of_range() -> None:
+    base = config_mod.load(None)
+    with pytest.raises(SpaceError, match="without min can draw"):
+        check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000]}))
+    with pytest.raises(SpaceError, match="without max can draw"):
+        check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 10}))
+    check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 10, "max": 9000}))
+
+
+def test_check_dist_accepts_an_unclipped_normal_that_stays_in_range() -> None:
+    base = config_mod.load(None)
+    check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [5000, 100]}))  # 10 sd: 4000-6000

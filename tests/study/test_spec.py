@@ -357,10 +357,40 @@ def test_params_equal_to_defaults_give_the_default_run_id() -> None:
     assert same.run_id == ref
 
 
-def test_expand_turns_an_unbounded_draw_refused_by_the_world_into_a_study_error() -> None:
-    spec = from_dict(_study(seeds=30, sample={"world.surgeon_force": {"normal": [1.0, 2.0]}}))
-    with pytest.raises(StudyError, match=r"world\.surgeon_force"):
-        expand(spec)
+def test_an_unclipped_normal_that_can_leave_the_keys_range_is_refused_at_load() -> None:
+    """A normal without min on a key that must stay > 0 could draw a refused value halfway through a
+    sweep; it is refused when the file is loaded, with a hint to clip it."""
+    for key, args in (("world.surgeon_force", [1.0, 2.0]), ("rcm.Kp", [300.0, 1000.0])):
+        err = _refused(_study(seeds=30, sample={key: {"normal": args}}), key)
+        assert "give it a min" in str(err)
+
+
+def test_a_normal_clipped_inside_the_keys_range_is_accepted_and_its_draws_expand() -> None:
+    spec = from_dict(_study(seeds=30, sample={"rcm.Kp": {"normal": [300.0, 1000.0], "min": 50.0, "max": 5000.0}}))
+    assert all(50.0 <= j.params["rcm.Kp"] <= 5000.0 for j in expand(spec))
+
+
+@pytest.mark.parametrize("name", ["../../etc/x", "a/b", "a\\b", "..", ".", "/abs", "x\0y"])
+def test_a_name_that_is_not_a_plain_folder_name_is_refused(name: str) -> None:
+    _refused(_study(name=name), "plain folder name")
+
+
+def test_a_very_long_name_is_refused_in_a_short_line() -> None:
+    err = _refused(_study(name="a" * 5000), "'name'")
+    assert len(str(err)) < 200
+
+
+def test_a_name_with_dots_inside_is_a_plain_folder_name() -> None:
+    assert from_dict(_study(name=" v1..2 ")).name == "v1..2"
+
+
+def test_a_corrupt_detector_model_is_refused_at_load(tmp_path: Path) -> None:
+    """The model is loaded when the file is, as ``lapwrench demo --detector`` does, not by every run."""
+    model = tmp_path / "garbage.onnx"
+    model.write_bytes(bytes(range(256)) * 12)
+    err = _refused(_study(detector=str(model)), "cannot be used")
+    assert "garbage.onnx" in str(err) and "\n" not in str(err)
+    _refused(_study(detector=str(tmp_path / "missing.onnx")), "missing.onnx")
 
 
 @PROP

@@ -157,3 +157,9 @@ def test_excess_is_non_negative_and_monotone(bound: float, a: float, b: float) -
     lo, hi = sorted((a, b))
     assert 0.0 <= c.excess(lo) <= c.excess(hi)
     assert (c.excess(a) == 0.0) == (a <= bound)
+
+
+def test_a_search_normal_that_can_leave_the_keys_range_is_refused() -> None:
+    """Ray Tune would drop such a trial halfway with a traceback; the file is refused instead."""
+    with pytest.raises(StudyError, match=r"rcm\.Kp.*give it a min"):
+        from_dict(_tune(search={"rcm.Kp": {"normal": [300, 1000]}}))

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from lapwrench.cli_types import int_in, output_dir, positive_float
+from lapwrench.config_yaml import cut, short
 
 ADDRESS_HELP = "an existing Ray cluster (HOST:PORT, or 'auto'); default: start Ray here, embedded"
 
@@ -79,7 +80,26 @@ def _out(args: argparse.Namespace, kind: str, name: str) -> Path:
     try:
         return ensure_writable_dir(out)
     except OSError as exc:
-        raise StudyUsageError(f"--out {out} is not writable: {exc.strerror or exc}") from exc
+        raise StudyUsageError(f"--out {cut(str(out), 100)} is not writable: {exc.strerror or exc}") from exc
+
+
+def _same_study(out: Path, name: str) -> None:
+    """Refuse a results folder that holds another study (its ``study.yaml`` names another): the rerun of
+    the same study resumes there, a different one would replace its study.yaml and mix their rows."""
+    from lapwrench.study.spec import StudyError, read_file
+
+    copy = out / "study.yaml"
+    if not copy.is_file():
+        return
+    try:
+        data, _ = read_file(copy, "study")
+    except StudyError as exc:
+        raise StudyUsageError(f"--out {cut(str(out), 100)} holds a study.yaml that cannot be read ({exc}); "
+                              "choose another --out") from exc
+    other = data.get("name") if isinstance(data, dict) else None
+    if isinstance(other, str) and other.strip() != name:
+        raise StudyUsageError(f"--out {cut(str(out), 100)} holds the results of study {short(other.strip())}, not "
+                              f"{short(name)}; choose another --out")
 
 
 def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
@@ -94,6 +114,8 @@ def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
         raise StudyUsageError(str(exc)) from exc
     _prepare(args, command)
     out = _out(args, "sweeps" if command == "sweep" else "tune", spec.name)
+    if command == "sweep":
+        _same_study(out, spec.name)
     _stop_on_signals()
     return spec, out
 
@@ -104,12 +126,14 @@ def sweep_main(args: argparse.Namespace) -> int:
     try:
         spec, out = _start(args, "sweep")
         from lapwrench.study.runner import SAVE_EVERY_S, ClusterError, run_study
+        from lapwrench.study.spec import StudyError
         from lapwrench.study.table import TableError
 
         try:
             outcome, table = run_study(spec, out, address=args.address, workers=args.workers, progress=not args.quiet,
+                                       retry_failed=args.retry_failed,
                                        save_every_s=SAVE_EVERY_S if args.save_every is None else args.save_every)
-        except (TableError, ClusterError) as exc:
+        except (TableError, ClusterError, StudyError) as exc:  # StudyError: a point expand() refuses
             raise StudyUsageError(str(exc)) from exc
     except StudyUsageError as exc:
         print(f"lapwrench sweep: {exc}", file=sys.stderr)

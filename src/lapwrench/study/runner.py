@@ -23,8 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lapwrench.config_yaml import short
 from lapwrench.study.execute import job_rows, one_line, run_job
-from lapwrench.study.spec import Job, StudySpec
+from lapwrench.study.spec import Job, StudyError, StudySpec
 from lapwrench.study.table import ResultTable
 
 SAVE_EVERY_S = 5.0  # default: the table is rewritten at most this often while results arrive (and at the end)
@@ -156,6 +157,8 @@ def run_study(
         ValueError: ``save_every_s`` is not a finite number > 0, or ``address``/``workers`` are given
             while Ray already runs in this process.
         TableError: the table exists but is damaged (before anything runs).
+        StudyError: the table holds another study's rows, or a point of the study is refused (before
+            anything runs).
         ClusterError: Ray could not start or connect.
         KeyboardInterrupt: after the finished rows were saved and the running tasks cancelled.
     """
@@ -171,6 +174,10 @@ def run_study(
         raise ValueError("Ray already runs in this process: address and workers must be None")
     out.mkdir(parents=True, exist_ok=True)
     table = ResultTable(out)
+    others = sorted({str(r["study"]) for r in table.rows if r.get("study") not in (None, spec.name)})
+    if others:  # their rows would mix with this study's in the report
+        raise StudyError(f"{table.path} holds rows of study {short(others[0])}, not {short(spec.name)}; "
+                         "choose another --out")
     if retry_failed:
         table.drop(table.failed_ids())
     jobs = expand(spec)

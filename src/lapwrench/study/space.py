@@ -30,6 +30,9 @@ from lapwrench.sim.variation import WorldVariation
 WORLD_PREFIX = "world."
 ROBOT_KEY = "robot"
 KINDS = ("uniform", "loguniform", "normal", "integer", "choice")
+# How far out an unclipped normal draw is checked, in standard deviations: numpy draws beyond it with
+# probability below 1e-23, so a side that passes here never yields a refused value.
+NORMAL_REACH_SD = 10.0
 
 
 class SpaceError(ValueError):
@@ -175,3 +178,25 @@ def check_key(base: config_mod.Config, key: str, values: tuple[Any, ...]) -> lis
             raise SpaceError(f"'{key}' = {short(v)}: {exc}") from exc
         resolved.append(json.dumps([config_mod.to_dict(cfg), world.to_dict()], sort_keys=True, default=str))
     return resolved
+
+
+def check_dist(base: config_mod.Config, key: str, dist: Dist) -> None:
+    """Check every value ``dist`` can draw for ``key`` before anything runs: its corners (see
+    :meth:`Dist.corners`), and for a normal, how far it reaches on a side left without ``min``/``max``.
+    A key with a range (a gain that must stay > 0, say) needs the clip there, or a draw beyond it would
+    fail a job (a sweep) or drop a trial (tune) halfway through. SpaceError naming the key otherwise."""
+    check_key(base, key, dist.corners())
+    if dist.kind != "normal":
+        return
+    mean, sd = dist.args
+    for side, bound, reach in (("min", dist.low, mean - NORMAL_REACH_SD * sd),
+                               ("max", dist.high, mean + NORMAL_REACH_SD * sd)):
+        if bound is not None:
+            continue
+        try:
+            apply(base, {key: reach})
+        except SpaceError as exc:
+            detail = " ".join(str(exc).split())
+            detail = detail if len(detail) <= 200 else detail[:197] + "..."
+            raise SpaceError(f"'{key}': normal {short(list(dist.args))} without {side} can draw {reach:.6g}, "
+                             f"which is refused ({detail}); give it a {side} inside the key's range") from exc

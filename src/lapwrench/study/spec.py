@@ -41,7 +41,7 @@ import numpy as np
 from lapwrench import config as config_mod
 from lapwrench.config_yaml import YamlConfigError, cut, parse, read_text, short
 from lapwrench.sim.scenarios import SCENARIOS
-from lapwrench.study.space import Dist, SpaceError, apply, check_key, is_number, parse_dist
+from lapwrench.study.space import Dist, SpaceError, apply, check_dist, check_key, is_number, parse_dist
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,7 @@ class ReportSpec:
 
 
 MAX_SEED = 2**32 - 1
+MAX_NAME_CHARS = 100  # a study's name is its results folder's name
 MAX_JOBS = 100_000  # a study bigger than this is almost surely a typo in a grid
 DETECTORS = ("shipped", "classical", "projected")
 DEFAULT_METRICS = ("m.completion_time_s", "m.rcm_error_max_mm", "m.trocar_force_max_N", "m.force_back_below_5N_after_s")
@@ -221,6 +222,34 @@ def _base(value: Any) -> config_mod.Config:
         raise StudyError(f"'config': {exc}") from exc
 
 
+def _name(value: Any) -> str:
+    """The study's name, stripped: it names the results folder (``reports/sweeps/<name>``), so it must be
+    a plain folder name; a path (``../../etc/x``) would write outside that folder."""
+    if not isinstance(value, str) or not value.strip():
+        raise StudyError(f"'name' must be text, got {short(value)}")
+    name = value.strip()
+    if len(name) > MAX_NAME_CHARS:
+        raise StudyError(f"'name' {short(name)} is longer than {MAX_NAME_CHARS} characters")
+    if any(c in name for c in "/\\\0") or name in (".", ".."):
+        raise StudyError(f"'name' {short(name)} must be a plain folder name (no '/', '\\' or '..')")
+    return name
+
+
+def _check_model(detector: str, base: config_mod.Config) -> None:
+    """Load a model file given as ``detector`` now, the way ``lapwrench demo --detector`` does: a missing or
+    corrupt model is refused before Ray starts, not found by every run failing. The named detectors
+    (the shipped model, classical, projected) come with the package."""
+    if detector in DETECTORS:
+        return
+    from lapwrench.sim.demo import DemoError
+    from lapwrench.sim.demo import _check_detector as check_detector
+
+    try:
+        check_detector(detector, base)
+    except DemoError as exc:
+        raise StudyError(str(exc)) from exc
+
+
 def check_top(data: Any, known: set[str], what: str) -> dict[str, Any]:
     """``data`` if it is a mapping of known keys; StudyError naming the first unknown one."""
     if not isinstance(data, dict):
@@ -234,9 +263,7 @@ def check_top(data: Any, known: set[str], what: str) -> dict[str, Any]:
 def from_dict(data: Any, source: str = "study") -> StudySpec:
     """Validate a parsed study and build its :class:`StudySpec`."""
     data = check_top(data, TOP_KEYS, "study")
-    name = data.get("name", Path(source).stem)
-    if not isinstance(name, str) or not name.strip():
-        raise StudyError(f"'name' must be text, got {short(name)}")
+    name = _name(data.get("name", Path(source).stem))
     scenarios = data.get("scenarios")
     if not isinstance(scenarios, list) or not scenarios:
         raise StudyError(f"'scenarios' must list scenario names ({', '.join(SCENARIOS)})")
@@ -250,6 +277,7 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
     if not isinstance(detector, str) or not (detector in DETECTORS or Path(detector).suffix in (".onnx", ".pt")):
         raise StudyError(f"'detector' must be one of {', '.join(DETECTORS)} or a model path, got {short(detector)}")
     base = _base(data.get("config"))
+    _check_model(detector, base)
     grid_in, sample_in = data.get("grid") or {}, data.get("sample") or {}
     if not isinstance(grid_in, dict) or not isinstance(sample_in, dict):
         raise StudyError("'grid' and 'sample' must be mappings of parameter keys")
@@ -267,11 +295,11 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
             if key in grid:
                 raise SpaceError(f"'{key}' is both in the grid and sampled")
             sample[key] = parse_dist(key, d)
-            check_key(base, key, sample[key].corners())
+            check_dist(base, key, sample[key])
     except SpaceError as exc:
         raise StudyError(f"{'grid' if key in grid_in else 'sample'}: {exc}") from exc
     report = dataclasses.replace(_report(data.get("report"), name), params=(*grid, *sample))
-    spec = StudySpec(name.strip(), tuple(scenarios), _seeds(data.get("seeds", 1)), base, float(ts), detector,
+    spec = StudySpec(name, tuple(scenarios), _seeds(data.get("seeds", 1)), base, float(ts), detector,
                      grid, sample, report)
     if spec.n_jobs() > MAX_JOBS:
         raise StudyError(f"{spec.n_jobs()} runs: more than {MAX_JOBS}; narrow the grid or the seeds")

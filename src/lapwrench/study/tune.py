@@ -10,6 +10,7 @@ that ``--config`` loads (``best.yaml``), checked by loading it back and running 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -111,13 +112,17 @@ class TuneOutcome:
 def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: int | None = None,
              progress: bool = True) -> TuneOutcome:
     """Search with Ray Tune (random search over ``spec.search``); write ``trials.parquet`` and, when
-    a trial met every constraint, ``best.yaml``."""
+    a trial met every constraint, ``best.yaml``. A KeyboardInterrupt (Ctrl-C) ends the search and
+    propagates, with nothing written."""
     import ray
     from ray import tune
 
     from lapwrench.study.runner import start_ray
     from lapwrench.study.table import to_frame
 
+    # Ray Tune's own SIGINT handler ends the search quietly and returns the trials so far, which would
+    # then be written up as the result; ours (see lapwrench.study.cli) raises KeyboardInterrupt instead.
+    os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
     cpus = start_ray(address, workers)
     try:
         tuner = tune.Tuner(

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lapwrench.config_yaml import short
-from lapwrench.study.space import Dist, SpaceError, check_key, is_number, parse_dist
+from lapwrench.study.space import Dist, SpaceError, check_dist, is_number, parse_dist
 from lapwrench.study.spec import StudyError, StudySpec, check_top, read_file
 from lapwrench.study.spec import from_dict as study_from_dict
 
@@ -108,7 +108,7 @@ def from_dict(data: Any, source: str = "tune") -> TuneSpec:
             if str(key).startswith("world.") or key in ("robot", "robot.kind"):
                 raise SpaceError(f"'{key}' is part of the world, not a gain: tune searches configuration keys")
             search[key] = parse_dist(key, d)
-            check_key(study.base, key, search[key].corners())
+            check_dist(study.base, key, search[key])
         except SpaceError as exc:
             raise StudyError(f"search: {exc}") from exc
     objective, reduce = _objective(data.get("objective"))
