@@ -140,35 +140,46 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The main job: the paper's experiments in the MuJoCo world, written to a report folder."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     from lapwrench.sim.demo import DemoError, plan_demo, run_demo
+    from lapwrench.sim.demo_tasks import stop_signals
 
     try:
-        plan = plan_demo(
-            args.out,
-            scenarios=args.scenarios,
-            config=args.config,
-            tracking_config=args.tracking_config,
-            seed=args.seed,
-            time_scale=args.time_scale,
-            video=not args.no_video,
-            detector=args.detector,
-            workers=1 if args.foxglove else args.workers,  # live: the scenarios run here, one after another
-            robot=args.robot,
-        )
+        with stop_signals():  # SIGTERM and SIGHUP as Ctrl-C: one line, 143 and 129
+            plan = plan_demo(
+                args.out,
+                scenarios=args.scenarios,
+                config=args.config,
+                tracking_config=args.tracking_config,
+                seed=args.seed,
+                time_scale=args.time_scale,
+                video=not args.no_video,
+                detector=args.detector,
+                workers=1 if args.foxglove else args.workers,  # live: the scenarios run here, one after another
+                robot=args.robot,
+            )
     except DemoError as exc:  # a bad argument or input file, found before anything ran
         raise UsageError(str(exc)) from exc
+    except KeyboardInterrupt as exc:
+        return _demo_interrupted(exc)
     try:
-        with _live(args.foxglove, plan.robot, "demo", list(plan.configs.values())):
+        with stop_signals(), _live(args.foxglove, plan.robot, "demo", list(plan.configs.values())):
             results = run_demo(plan, progress=not args.quiet)
     except DemoError as exc:  # a run that failed (FAILED.txt says why)
         print(f"lapwrench demo: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("lapwrench demo: interrupted; no report was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP (FAILED.txt says so)
+        return _demo_interrupted(exc)
     for name, res in results.items():
         print(f"{name}: " + ", ".join(f"{r.label}: RCM max {r.metrics['rcm_error_max_mm']:.2f} mm" for r in res.runs))
     print(f"report: {Path(args.out) / 'report.md'}")
     return 0
+
+
+def _demo_interrupted(exc: KeyboardInterrupt) -> int:
+    """The demo's line for a stop signal (a ``DemoInterrupted`` names it); returns 128 + its number."""
+    code = int(getattr(exc, "exit_code", 130))
+    how = "interrupted" if code == 130 else f"stopped by {getattr(exc, 'name', 'a signal')}"
+    print(f"lapwrench demo: {how}; no report was written", file=sys.stderr)
+    return code
 
 
 def build_parser() -> argparse.ArgumentParser:

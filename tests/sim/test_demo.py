@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -103,3 +108,56 @@ def test_demo_refuses_a_control_rate_other_than_the_simulated_franka(tmp_path: P
     cfg.write_text("robot: {control_rate_hz: 500}\n")
     with pytest.raises(demo_mod.DemoError, match="control_rate_hz must be 1000"):
         demo_mod.plan_demo(tmp_path / "out", config=str(cfg))
+
+
+def _group(pgid: int) -> list[int]:
+    """The processes of process group ``pgid`` still running (zombies aside)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _workers_started(pgid: int) -> bool:
+    for pid in _group(pgid):
+        try:
+            if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_to_the_demo_writes_failed_txt_and_leaves_no_worker(tmp_path: Path, sig: signal.Signals) -> None:
+    """SIGTERM or SIGHUP to the demo alone (its workers busy) ends it as Ctrl-C does: FAILED.txt in place
+    of the previous report, one line, exit 128 + the signal, and its worker processes stopped."""
+    (tmp_path / "report.md").write_text("an earlier report\n")
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    cmd = [sys.executable, "-m", "lapwrench.cli", "demo", "--out", str(tmp_path),
+           "--scenarios", "grip", "rcm-disturbance",
+           "--time-scale", "0.5", "--no-video", "--detector", "projected", "--workers", "2", "--quiet"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        while not _workers_started(proc.pid):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        proc.send_signal(sig)
+        _out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 128 + sig, err
+    assert err.decode().strip() == f"lapwrench demo: stopped by {sig.name}; no report was written"
+    assert (tmp_path / "FAILED.txt").read_text().startswith(f"stopped by {sig.name}")
+    assert not (tmp_path / "report.md").exists()
+    for _ in range(300):  # the workers end with the demo (the resource tracker too)
+        if not _group(proc.pid):
+            break
+        time.sleep(0.1)
+    assert _group(proc.pid) == []

@@ -40,6 +40,7 @@ from lapwrench.hardware.rt import (
     bus_layout,
 )
 from lapwrench.hardware.shm import Bus, Layout
+from lapwrench.spawn import quiet_process, start_quiet
 
 __all__ = ["DetectorProcess", "frame_layout", "shipped_factory", "spec_factory"]
 
@@ -196,16 +197,17 @@ class DetectorProcess:
         parent_conn, child_conn = ctx.Pipe()
         self._conn = parent_conn
         self._bus["ctl"][CTL_DET_STOP] = 0
-        self.proc = ctx.Process(
-            target=_detector_main,
-            args=(
+        self.proc = quiet_process(
+            ctx,
+            _detector_main,
+            (
                 self.factory, self.frames.name, self.size, self.bus_name, self.bus_rows, child_conn, self.poll_s,
                 self.nice, self.cpus,
             ),
             name="lapwrench-detector",
             daemon=True,
         )
-        self.proc.start()
+        start_quiet(self.proc)  # Ctrl-C is this process's to handle: it stops the detector
         child_conn.close()
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:

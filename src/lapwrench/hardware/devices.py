@@ -20,6 +20,7 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from lapwrench.drivers.ft import wire_counts
+from lapwrench.spawn import quiet_process, start_quiet
 
 
 class CliError(Exception):
@@ -314,13 +315,14 @@ class SimulatedHexProcess:
 
     def start(self, timeout: float = 30.0) -> SimulatedHexProcess:
         self._conn, child = self.ctx.Pipe()
-        self.proc = self.ctx.Process(
-            target=_simulated_hex_main,
-            args=(self.force_fn, self.t0, self.rate_hz, child, self.fifo_priority),
+        self.proc = quiet_process(
+            self.ctx,
+            _simulated_hex_main,
+            (self.force_fn, self.t0, self.rate_hz, child, self.fifo_priority),
             name="lapwrench-simulated-hex",
             daemon=True,
         )
-        self.proc.start()
+        start_quiet(self.proc)  # Ctrl-C is this process's to handle: it stops the box
         child.close()
         if not self._conn.poll(timeout):
             self.close()

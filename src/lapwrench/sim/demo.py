@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import platform
+import signal
 import time
 import traceback
 from pathlib import Path
@@ -23,7 +24,16 @@ from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import cue_scenarios, plots, report
-from lapwrench.sim.demo_tasks import PRINTED_DAMPING, TRACKING_SCENARIOS, DemoError, DemoPlan, run_tasks
+from lapwrench.sim.demo_tasks import (
+    PRINTED_DAMPING,
+    TRACKING_SCENARIOS,
+    DemoError,
+    DemoInterrupted,
+    DemoPlan,
+    StopSignals,
+    run_tasks,
+    stop_signals,
+)
 from lapwrench.sim.results import ScenarioResult
 from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, scenarios_for
 from lapwrench.sim.world import CONTROL_DT
@@ -92,7 +102,7 @@ def plan_demo(
                 f"robot.control_rate_hz must be {1.0 / CONTROL_DT:.0f} (the simulated Franka runs at 1 kHz), "
                 f"got {c.robot.control_rate_hz}"
             )
-    _check_detector(detector, tracking)
+    check_detector(detector, tracking)
     try:
         out = config_mod.ensure_writable_dir(out)
     except OSError as exc:
@@ -117,7 +127,7 @@ def plan_demo(
     )
 
 
-def _check_detector(spec: str, cfg: config_mod.Config) -> None:
+def check_detector(spec: str, cfg: config_mod.Config) -> None:
     """Load the detector now, through the factory the scenarios use, whatever scenarios run: a bad
     model is refused here, before anything is simulated or the folder's previous report is touched,
     not when a tracking scenario starts minutes later."""
@@ -135,14 +145,30 @@ def _check_detector(spec: str, cfg: config_mod.Config) -> None:
 
 
 def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]:
+    """Run ``plan`` and write its report; returns the results by scenario.
+
+    Raises:
+        DemoError: a scenario failed (``FAILED.txt`` says why).
+        KeyboardInterrupt: Ctrl-C, SIGTERM or SIGHUP (:class:`DemoInterrupted`, from the main thread):
+            the workers are stopped and ``FAILED.txt`` written.
+    """
+    with stop_signals() as signals:
+        return _run_demo(plan, progress, signals)
+
+
+def _run_demo(plan: DemoPlan, progress: bool, signals: StopSignals) -> dict[str, ScenarioResult]:
     from tqdm import tqdm
 
     out = plan.out
-    for stale in ("report.md", "metrics.json", "FAILED.txt"):
-        (out / stale).unlink(missing_ok=True)
-    (out / "configs").mkdir(exist_ok=True)
-    for name, cfg in plan.configs.items():
-        config_mod.dump(cfg, out / "configs" / f"{name}.yaml")
+    try:
+        for stale in ("report.md", "metrics.json", "FAILED.txt"):
+            (out / stale).unlink(missing_ok=True)
+        (out / "configs").mkdir(exist_ok=True)
+        for name, cfg in plan.configs.items():
+            config_mod.dump(cfg, out / "configs" / f"{name}.yaml")
+    except KeyboardInterrupt as exc:  # the previous report may be gone already: say why
+        _write_failed(out, exc)
+        raise
     total = sum(SIM_SECONDS[n] for n in plan.scenarios) * plan.time_scale
     if plan.printed_damping_check:
         total += SIM_SECONDS["needle-search"] * plan.time_scale  # the check is a needle search
@@ -160,8 +186,10 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
         done = run_tasks(plan, names, bar)
     except (DemoError, KeyboardInterrupt) as exc:
         bar.close()
+        if signals.signum is not None and not isinstance(exc, KeyboardInterrupt):  # a worker the signal ended
+            exc = DemoInterrupted(signals.signum)
         _write_failed(out, exc)
-        raise
+        raise exc
     bar.update(max(0.0, bar.total - bar.n))
     bar.close()
     results = {n: done[n] for n in plan.scenarios}
@@ -192,7 +220,12 @@ def run_demo(plan: DemoPlan, progress: bool = True) -> dict[str, ScenarioResult]
 def _write_failed(out: Path, exc: BaseException) -> None:
     """``FAILED.txt``: why the run stopped (and where, for an unexpected exception), in place of the
     report the run deleted at its start."""
-    text = "interrupted (Ctrl-C); no report was written" if isinstance(exc, KeyboardInterrupt) else str(exc)
+    if isinstance(exc, DemoInterrupted) and exc.signum != signal.SIGINT:
+        text = f"stopped by {exc.name}; no report was written"
+    elif isinstance(exc, KeyboardInterrupt):
+        text = "interrupted (Ctrl-C); no report was written"
+    else:
+        text = str(exc)
     cause = exc.__cause__
     if cause is not None:
         text += "\n\n" + "".join(traceback.format_exception(cause))

@@ -5,10 +5,13 @@ first, with the progress of every worker fed into one bar.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import multiprocessing as mp
 import os
 import signal
+import threading
+from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -20,6 +23,7 @@ from lapwrench.sim.loop import SafetyStopError
 from lapwrench.sim.results import ScenarioOptions, ScenarioResult
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, needle_search
 from lapwrench.sim.world import SimulationUnstableError
+from lapwrench.spawn import ensure_resource_tracker, quietly, sigint_blocked
 
 TRACKING_SCENARIOS = ("needle-search", "workflow")
 
@@ -47,6 +51,55 @@ class DemoPlan:
 
 class DemoError(RuntimeError):
     """A bad demo input, reported before any simulation starts."""
+
+
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class DemoInterrupted(KeyboardInterrupt):
+    """The demo stopped by a signal (Ctrl-C, ``kill``, a closed terminal): no report is written."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:  # 130, 143, 129
+        return 128 + self.signum
+
+    @property
+    def name(self) -> str:
+        return signal.Signals(self.signum).name
+
+
+class StopSignals:
+    """While active (:func:`stop_signals`), the first of :data:`STOP_SIGNALS` raises
+    :class:`DemoInterrupted` in the main thread and is kept in ``signum``; any further one is ignored:
+    the workers are being stopped and FAILED.txt written."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self, signum: int, _frame: object) -> None:
+        if self.signum is None:
+            self.signum = signum
+            raise DemoInterrupted(signum)
+
+
+@contextlib.contextmanager
+def stop_signals() -> Iterator[StopSignals]:
+    """SIGINT, SIGTERM and SIGHUP end the demo alike (:class:`StopSignals`); the previous handlers
+    are back after the block. Outside the main thread nothing is installed."""
+    handler = StopSignals()
+    if threading.current_thread() is not threading.main_thread():
+        yield handler
+        return
+    old = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+    try:
+        yield handler
+    finally:
+        for sig, previous in old.items():
+            signal.signal(sig, previous if previous is not None else signal.SIG_DFL)
 
 
 PRINTED_DAMPING = "needle-search, printed damping"
@@ -94,6 +147,14 @@ def _init_worker(queue: Any) -> None:
     global _PROGRESS
     _PROGRESS = queue
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle
+    parent = mp.parent_process()
+    if parent is not None:  # a worker never outlives the demo, however it ended (even SIGKILL)
+        threading.Thread(target=_exit_with, args=(parent,), name="lapwrench-demo-orphan", daemon=True).start()
+
+
+def _exit_with(parent: Any) -> None:
+    parent.join()  # returns when the parent process has ended
+    os._exit(1)
 
 
 _PROGRESS: Any = None
@@ -154,8 +215,10 @@ def run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, ScenarioR
     Controller(plan.configs[names[0]] if names[0] in plan.configs else config_mod.load())  # compile once, here:
     # the workers then load numba's cache instead of each compiling the tick (a minute on a fresh clone)
     ctx = mp.get_context("spawn")  # no fork of a process holding MuJoCo/EGL and numba state
+    ensure_resource_tracker()  # before the queue's semaphores: a SIGHUP must not end it
     queue = ctx.Queue()
-    pool = ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=_init_worker, initargs=(queue,))
+    # the workers start with Ctrl-C ignored (lapwrench.spawn): the main process stops them
+    pool = ProcessPoolExecutor(plan.workers, mp_context=ctx, initializer=quietly(_init_worker), initargs=(queue,))
     try:
         return _collect(pool, plan, names, queue, bar, out)
     except BaseException:  # Ctrl-C or a failed scenario: stop the other workers now, not at their end
@@ -173,7 +236,8 @@ def _collect(
 ) -> dict[str, ScenarioResult | str]:
     """Submit the tasks costliest first (:func:`task_cost`) and gather their results, feeding the progress bar."""
     order = sorted(names, key=lambda n: -task_cost(n, plan.detector))
-    names_of = {pool.submit(_task, n, plan): n for n in order}
+    with sigint_blocked():  # the workers start on the first submits
+        names_of = {pool.submit(_task, n, plan): n for n in order}
     pending = set(names_of)
     bar.set_postfix_str(f"{plan.workers} workers")
     while pending:

@@ -241,8 +241,7 @@ def _check_model(detector: str, base: config_mod.Config) -> None:
     (the shipped model, classical, projected) come with the package."""
     if detector in DETECTORS:
         return
-    from lapwrench.sim.demo import DemoError
-    from lapwrench.sim.demo import _check_detector as check_detector
+    from lapwrench.sim.demo import DemoError, check_detector
 
     try:
         check_detector(detector, base)

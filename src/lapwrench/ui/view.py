@@ -25,6 +25,7 @@ import numpy as np
 from lapwrench.config import Config, from_dict, to_dict
 from lapwrench.controller import TickResult
 from lapwrench.sim.scene.names import CAMERA_NAME
+from lapwrench.spawn import quiet_process, start_quiet
 from lapwrench.ui.session import Session, Snapshot
 
 MIN_FPS = 5.0  # the view's lowest frame rate when the simulation falls behind
@@ -183,9 +184,7 @@ class LaparoscopeView:
         ctx = mp.get_context("spawn")  # no fork of a threaded process with GL state
         parent, child = ctx.Pipe()
         args = (to_dict(self.session.cfg), self.scale, child, self.render_nice())
-        process = ctx.Process(target=render_worker, args=args,
-                              name="lapwrench-ui-render", daemon=True)
-        process.start()
+        process = start_quiet(quiet_process(ctx, render_worker, args, name="lapwrench-ui-render", daemon=True))
         self._process = process  # only a started process: _run joins it
         child.close()
         if not parent.poll(120.0) or parent.recv() != "ready":

@@ -31,6 +31,7 @@ from lapwrench.hardware.rt.codec import INTERN, CycleCodec
 from lapwrench.hardware.rt.peers import PeerSpec
 from lapwrench.hardware.rt.spec import RtProcessError, RtResult, RtSpec, _error
 from lapwrench.hardware.shm import Bus, unpack_event
+from lapwrench.spawn import ensure_resource_tracker, quiet_process, start_quiet
 
 
 class RtProcess:
@@ -86,6 +87,7 @@ class RtProcess:
         self.feed_period = feed_period
         self.stop_wait = stop_wait
         self.ctx = mp.get_context(start_method)
+        ensure_resource_tracker()  # the bus is registered with it: a closed terminal must not end it
         self.bus = Bus.create(bus_layout(spec.log_rows, spec.event_rows, spec.input_slots))
         self.codec = CycleCodec()
         self.proc: Any = None
@@ -120,18 +122,22 @@ class RtProcess:
             RtProcessError: it failed or died (``kind`` in ``.kind``: robot, device, internal, died).
         """
         parent_conn, child_conn = self.ctx.Pipe()
-        proc = self.ctx.Process(
-            target=_child_main,
-            args=(self.spec, self.bus.name, child_conn, self.peers()),
-            name="lapwrench-rt",
+        proc = quiet_process(  # SIGINT ignored there: Ctrl-C is this process's to handle (it asks for the stop)
+            self.ctx, _child_main, (self.spec, self.bus.name, child_conn, self.peers()), name="lapwrench-rt",
             daemon=True,
         )
         self.bus["beat"][BEAT_PARENT] = time.monotonic()
         try:
-            proc.start()  # spawn pickles the spec: a factory that does not pickle fails here
-        except Exception as exc:
+            start_quiet(proc)  # spawn pickles the spec: a factory that does not pickle fails here
+        except BaseException as exc:
+            if proc.pid is not None:  # started, then a signal's handler raised: close() stops it
+                self.proc, self._conn = proc, parent_conn
+                child_conn.close()
+                raise
             parent_conn.close()
             child_conn.close()
+            if not isinstance(exc, Exception):
+                raise
             why = f"{type(exc).__name__}: {exc}"
             raise _error("internal", f"the real-time process could not be started: {why}") from exc
         self.proc, self._conn = proc, parent_conn  # only a started process: close() joins it
