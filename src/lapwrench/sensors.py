@@ -101,6 +101,8 @@ def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
     if type(x) is np.ndarray and x.dtype is _F64 and x.ndim == 1 and len(x) == n and x.flags.carray:
         return x  # the common case, checked cheaply (no shape tuple built)
+    if (x.size if isinstance(x, np.ndarray) else len(x) if isinstance(x, list | tuple) else n) != n:
+        return None  # refused before a copy: a reading of 10^7 values must not cost the tick its conversion
     a = real_array(x)
     return a if a is not None and a.shape == (n,) else None
 
@@ -325,6 +327,12 @@ class InputValidator:
 
     def _points(self, points: object) -> tuple[Vec | None, str]:
         """The image points as a C-contiguous float64 (n, 2) array, or None and why not (shape, count)."""
+        listed = isinstance(points, list | tuple) or (isinstance(points, np.ndarray) and points.ndim > 0)
+        count = len(points) if listed else 0  # type: ignore[arg-type]
+        if count > self.max_instruments or (isinstance(points, np.ndarray) and points.size > 2 * count):
+            # counted before any copy: a million detections must not cost the tick their conversion
+            return None, (f"{count} detections in one frame (at most {self.max_instruments}): a detector fault"
+                          if count > self.max_instruments else "image points must be (n, 2) real numbers")
         pts = real_array(points)
         if pts is None or pts.ndim != 2 or pts.shape[1] != 2:
             return None, "image points must be (n, 2) real numbers"

@@ -58,7 +58,8 @@ def test_demo_video_of_a_tracking_scenario(tmp_path: Path) -> None:
         ({"scenarios": ["grip", "laparotomy"]}, "unknown scenario laparotomy"),
         ({"config": "/nonexistent/c.yaml"}, "config file not found"),
         ({"time_scale": 3.0}, "time scale"),
-        ({"detector": "/nonexistent/model.onnx"}, "detector must be"),
+        ({"detector": "/nonexistent/model.onnx"}, "detector must be.*not found"),
+        ({"detector": "/tmp"}, "detector must be.*is not a file"),  # a folder: there, but no model
     ],
 )
 def test_bad_demo_inputs_fail_before_any_simulation(tmp_path: Path, kwargs: dict, match: str) -> None:

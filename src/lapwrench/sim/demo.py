@@ -71,7 +71,8 @@ def plan_demo(
         raise DemoError(f"unknown scenario {', '.join(n[:60] for n in unknown)}; choose from {', '.join(SCENARIOS)}")
     if detector not in ("shipped", "classical", "projected") and not Path(detector).is_file():
         raise DemoError(
-            f"detector must be shipped, classical, projected or a model file; {detector[:60]!r} not found"
+            f"detector must be shipped, classical, projected or a model file; {detector[:60]!r} "
+            f"{'is not a file' if Path(detector).exists() else 'not found'}"
         )
     if detector == "shipped":
         from lapwrench.perception import SHIPPED_MODEL
