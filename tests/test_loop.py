@@ -127,6 +127,26 @@ def test_a_hook_exception_is_an_alarm_and_the_arm_stops_at_rest(hook: str) -> No
     assert loop.supervisor.at_rest and len(calls) > 301  # still called while stopping
 
 
+def test_after_a_restart_a_hook_exception_is_an_alarm_again() -> None:
+    """The loop forgets a failed hook when it starts again, as it forgets a failed controller."""
+    failing = [True]
+
+    def hook(now: float) -> None:
+        if failing[0]:
+            raise OSError("boom")
+
+    loop, clock = _loop(wall_deadlines=False, after_command=hook)
+    _cycles(loop, clock, 1)
+    assert (loop.supervisor.alarm_reason or "").startswith("hook_error")
+    failing[0] = False
+    loop.start()
+    _cycles(loop, clock, 5)
+    assert not loop.supervisor.alarm
+    failing[0] = True
+    _cycles(loop, clock, 1)
+    assert (loop.supervisor.alarm_reason or "").startswith("hook_error: after_command")
+
+
 def test_a_controller_exception_becomes_an_alarm_and_the_arm_stops_at_rest() -> None:
     loop, clock = _loop(wall_deadlines=False)
     _cycles(loop, clock, 200)

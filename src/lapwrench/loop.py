@@ -152,6 +152,8 @@ class ControlLoop:
         measure_scope(self.controller.model, reading.q, self.controller.rcm.p_R)  # loads its compiled code now
         self.supervisor.start(reading.q, 0.0)
         self._controller_failed = False
+        self._hooks_failed.clear()  # a restart's first hook exception is an alarm again
+        self._tail = 0.0
         self.last_reading = reading
         self._started = True
         self.k = 0
