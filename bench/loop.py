@@ -33,6 +33,7 @@ import argparse
 import functools
 import json
 import os
+import resource
 import sys
 import threading
 import time
@@ -69,9 +70,12 @@ class TickTimer:
                     self.n += 1
 
         loop.controller.tick = timed
+        self.faults = resource.getrusage(resource.RUSAGE_SELF)  # from here on: the run (warm-up done)
 
     def report(self) -> dict[str, Any]:
-        return {"tick_us": (self.times[: self.n] * 1e6).tolist()}
+        now = resource.getrusage(resource.RUSAGE_SELF)
+        return {"tick_us": (self.times[: self.n] * 1e6).tolist(), "major_faults": now.ru_majflt - self.faults.ru_majflt,
+                "minor_faults": now.ru_minflt - self.faults.ru_minflt}
 
 
 def longest_run(mask: np.ndarray) -> int:
@@ -269,6 +273,8 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
         "frankysim_realtime_factor_x": None if fs is None else round(fs.realtime_factor, 3),
         "live_messages_per_s": round(client.messages / wall, 1) if client is not None else None,
         "live_kbytes_per_s": round(client.bytes / wall / 1e3, 1) if client is not None else None,
+        "page_faults_major": rep.get("major_faults"),  # the loop's process, from its first cycle to its end
+        "page_faults_minor": rep.get("minor_faults"),
         "rt_problems": ready.get("rt_problems"),
         "alarm": st.alarm,
         "stopped_at_rest": st.stopped_at_rest,
@@ -319,6 +325,7 @@ def main() -> int:
             f" longest run {r['longest_miss_run_cycles']};"
             f" F/T fresh {r['ft_fresh_pct']} %; detector {r['detector_fps_hz']} fps;"
             f" franky-sim step p50 {r['frankysim_step_p50_us']} us, x{r['frankysim_realtime_factor_x']};"
+            f" page faults in the loop's process {r['page_faults_major']} major / {r['page_faults_minor']} minor;"
             f" rt: {r['rt_problems'] or 'SCHED_FIFO ' + str(a.rt_priority) if a.rt_priority else 'normal priority'}"
         )
     res: dict[str, Any] = {"deadline_budget_us": a.budget_us, "detector": a.detector, "rt_priority": a.rt_priority}
