@@ -98,6 +98,40 @@ def test_after_command_runs_once_a_cycle_after_the_command_and_counts_in_the_nex
     assert (loop.supervisor.alarm_reason or "").startswith("deadline")
 
 
+def test_on_hardware_all_work_between_a_command_and_the_next_read_counts_in_the_busy_time() -> None:
+    """``on_cycle`` (the run log) and the caller's own work between cycles delay the next state read as
+    much as the hooks do: both count in the next cycle's busy time when the deadlines are the wall clock's
+    (before, only the hooks did, and 60 ms of logging a cycle went unseen)."""
+    loop, clock = _loop(budget=0.05, wall_deadlines=True, on_cycle=lambda c: time.sleep(0.06))
+    _cycles(loop, clock, 4)
+    assert loop.supervisor.deadline_misses == 3 and (loop.supervisor.alarm_reason or "").startswith("deadline")
+    loop, clock = _loop(budget=0.05, wall_deadlines=True)
+    for _ in range(3):
+        loop.cycle()
+        time.sleep(0.06)  # the caller between two cycles
+    assert loop.supervisor.deadline_misses == 2 and loop.over_budget == 2
+
+
+def test_in_simulation_the_time_between_cycles_is_the_worlds_not_the_loops() -> None:
+    """Without wall-clock deadlines (the simulated robot waits for the loop), what happens between cycles
+    (the world stepping, rendering, recording traces) is not the loop's busy time; its hooks still are."""
+    loop, clock = _loop(budget=0.05, wall_deadlines=False, on_cycle=lambda c: time.sleep(0.06))
+    _cycles(loop, clock, 3)
+    assert loop.over_budget == 0
+    loop, clock = _loop(budget=0.05, wall_deadlines=False, after_command=lambda now: time.sleep(0.06))
+    _cycles(loop, clock, 3)
+    assert loop.over_budget == 2 and loop.supervisor.deadline_misses == 0
+
+
+def test_a_hold_cycle_starts_the_next_busy_time_afresh() -> None:
+    loop, _ = _loop(budget=0.05, wall_deadlines=True)
+    loop.cycle()
+    time.sleep(0.06)
+    loop.hold_cycle()  # outside the controller's cycles: the next cycle's busy time is measured from here
+    loop.cycle()
+    assert loop.supervisor.deadline_misses == 0
+
+
 def test_a_quick_after_command_hook_is_no_deadline_miss() -> None:
     loop, clock = _loop(budget=0.05, wall_deadlines=True, after_command=lambda now: None)
     _cycles(loop, clock, 50)

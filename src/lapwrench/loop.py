@@ -26,9 +26,11 @@ Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a 
 ``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
 every cycle's busy time is checked against the supervisor's budget (deadline misses, and an alarm
 after too many in a row): its compute time (state read to command computed) plus the loop's own work
-after the previous command (the filter, ``after_command``; not the robot's ``command``), which all
-delays the next read. In simulation the clock is the simulated time: the simulated robot waits for
-the loop, so the compute time is measured and reported but has no deadline (``wall_deadlines=False``).
+around the previous command (the filter, then everything from the command's return to this read:
+``after_command``, ``on_cycle``'s logging, the run's bookkeeping), which all delays the read. In
+simulation the clock is the simulated time: the simulated robot waits for the loop, so the compute
+time is measured and reported but has no deadline (``wall_deadlines=False``); the time between its
+cycles is the world's, so only the filter and the hooks count there.
 """
 
 from __future__ import annotations
@@ -130,7 +132,8 @@ class ControlLoop:
         self._t_prev: float | None = None
         self._controller_failed = False
         self._hooks_failed: set[str] = set()
-        self._tail = 0.0  # the loop's own work after the previous cycle's compute (s): filter, after_command
+        self._tail = 0.0  # the loop's own work around the previous command (s): module docstring
+        self._pre_command, self._t_after = 0.0, None  # the previous cycle's: filter time (s), command's return
         self._started = False
         self.last_result: TickResult | None = None
         self.last_reading: RobotReading | None = None
@@ -153,7 +156,7 @@ class ControlLoop:
         self.supervisor.start(reading.q, 0.0)
         self._controller_failed = False
         self._hooks_failed.clear()  # a restart's first hook exception is an alarm again
-        self._tail = 0.0
+        self._tail, self._t_after = 0.0, None
         self.last_reading = reading
         self._started = True
         self.k = 0
@@ -165,8 +168,11 @@ class ControlLoop:
         if not self._started:
             raise RuntimeError("call ControlLoop.start() before cycle()")
         sup = self.supervisor
+        t_call = time.perf_counter()
         reading = self.robot.read()
         t_read = time.perf_counter()
+        if self.wall_deadlines and self._t_after is not None:  # all since the last command delayed this read
+            self._tail = self._pre_command + (t_call - self._t_after)
         now = self.clock()
         if self.pre_cycle is not None:
             self._hook("pre_cycle", self.pre_cycle, now)
@@ -205,7 +211,9 @@ class ControlLoop:
         t_after = time.perf_counter()
         if self.after_command is not None:
             self._hook("after_command", self.after_command, now)
-        self._tail = (t_command - t_read - compute) + (time.perf_counter() - t_after)
+        self._pre_command, self._t_after = t_command - t_read - compute, t_after
+        if not self.wall_deadlines:  # simulated: the time between cycles is the world's; the hooks' alone count
+            self._tail = self._pre_command + (time.perf_counter() - t_after)
         period = 0.0 if self._t_prev is None else t_read - self._t_prev
         self._t_prev = t_read
         out = Cycle(self.k, frame, reading, result, scope, q_cmd, compute, period, sup.drain_events())
@@ -224,7 +232,7 @@ class ControlLoop:
         q_cmd = self.supervisor.filter(t, reading.q, q_measured=reading.q)
         self.robot.command(q_cmd)
         self.flush_events()
-        self.last_reading = reading
+        self.last_reading, self._t_after = reading, None  # the next cycle's busy time starts afresh
         self.k += 1
         return q_cmd
 
@@ -369,20 +377,11 @@ class ControlLoop:
         if disconnect:
             self._safe_disconnect()
         return LoopStats(
-            cycles=cyc.n,
-            cycle_us=cyc.array()[1:] if not cyc.dropped else cyc.array(),  # the first cycle has no period
-            compute_us=comp.array(),
-            rcm_error_measured=rm.array(),
-            rcm_error_reference=rr.array(),
-            commands=cmds.array(),
-            rcm_error_measured_max=rcm_peak if cyc.n else None,
-            q_start=q_start,
-            p_R=np.array(self._p_R(), dtype=float),
-            robot_time=robot_t,
-            wall_time=time.perf_counter() - wall0,
-            deadline_misses=sup.deadline_misses,
-            over_budget=self.over_budget,
-            alarm=sup.alarm_reason,
+            cycles=cyc.n, cycle_us=cyc.array()[1:] if not cyc.dropped else cyc.array(),  # the first has no period
+            compute_us=comp.array(), rcm_error_measured=rm.array(), rcm_error_reference=rr.array(),
+            commands=cmds.array(), rcm_error_measured_max=rcm_peak if cyc.n else None, q_start=q_start,
+            p_R=np.array(self._p_R(), dtype=float), robot_time=robot_t, wall_time=time.perf_counter() - wall0,
+            deadline_misses=sup.deadline_misses, over_budget=self.over_budget, alarm=sup.alarm_reason,
             stopped_at_rest=sup.at_rest,
         )
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hardware.support import build_loop
+from hardware.support import MemoryLogger, build_loop
 
 from lapwrench.buffer import LatestValue
 from lapwrench.config import Config
@@ -106,3 +106,19 @@ def test_runner_with_stale_sources_never_waits(sim_world: Any, panda_cfg: Any) -
     stale = [m for _, k, m in log.events if k == "input_stale"]
     assert any(m.startswith("ft") for m in stale) and any(m.startswith("tactile") for m in stale)
     assert np.percentile(stats.compute_us, 50) < 5000
+
+
+class EventsOnlyLogger(MemoryLogger):
+    """A logger that takes events only (the real-time process's sink without ``--log``)."""
+
+    logs_cycles = False
+
+
+def test_a_logger_that_takes_events_only_is_given_no_cycle_records(sim_world: Any, panda_cfg: Config) -> None:
+    loop, _ = build_loop(SimRobot(sim_world), panda_cfg, None)
+    log = EventsOnlyLogger()
+    loop.logger = log
+    loop.sources = Sources(ft=LatestValue("ft"))  # never published: an input_stale event
+    stats = loop.run(0.05)
+    assert stats.cycles >= 50 and log.cycles == []
+    assert any(kind == "input_stale" for _, kind, _ in log.events)

@@ -202,9 +202,10 @@ class ControlLoop(loop.ControlLoop):
     def _log(self, c: Cycle) -> None:
         if self.logger is None:
             return
-        state = str(self.supervisor.state)  # a StrEnum's value by str's own __str__ (Enum's .value is a slow property)
-        rec = cycle_record(c, state, self.supervisor.alarm, getattr(self.robot, "tau_J", None))
-        if rec is not None:
-            self.logger.cycle(rec)
+        if getattr(self.logger, "logs_cycles", True):  # the real-time process's sink: events only without --log
+            state = str(self.supervisor.state)  # a StrEnum's value by str's __str__ (Enum's .value is a slow property)
+            rec = cycle_record(c, state, self.supervisor.alarm, getattr(self.robot, "tau_J", None))
+            if rec is not None:
+                self.logger.cycle(rec)
         self._log_events(c.events)
 

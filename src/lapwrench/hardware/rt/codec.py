@@ -220,6 +220,11 @@ class ShmLogSink:
         self.codec = CycleCodec(self._announce)
         self.encode_errors = 0
 
+    @property
+    def logs_cycles(self) -> bool:
+        """False when it takes events only (a run without ``--log``): the loop then builds no cycle records."""
+        return self.cycles
+
     def _announce(self, table: str, name: str) -> bool:
         return self.event(0.0, INTERN, f"{table}:{name}")
 
