@@ -18,8 +18,10 @@ through shared memory, drains the log ring and waits. Two runs of ``--seconds`` 
 Per run: compute time (``readOnce`` return → command ready) p50/p99, the controller tick's own
 p50/p99 and its share of the compute time; the real-time process's hooks (F/T drain, shared inputs,
 peer watch), which run after the command in the cycle's slack, p50/p99, and each cycle's busy time
-(compute + the hooks after the previous command) p99; deadline misses (the supervisor's: busy time over
-``--budget-us``; ``compute_misses``: compute alone over it, the rule before 2026-12-03) and the
+(compute + the hooks after the previous command) p99; deadline misses (the supervisor's: its busy time,
+the compute plus all the loop's work from the previous command's return to this state read, hooks, the
+run log and the run's bookkeeping included, over ``--budget-us``; ``compute_misses``: compute alone over
+it, the rule before 2026-12-03) and the
 longest run of consecutive misses, the F/T sample fresh fraction (the newest F/T sample at most
 20 ms old when the cycle reads it), the detector's frame rate, franky-sim's own step time and its
 real-time factor. franky-sim is a Python server on the same two cores, so the *cycle* time is
