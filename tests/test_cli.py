@@ -329,3 +329,20 @@ def test_ctrl_c_in_a_command_is_one_line_and_exit_130(
     assert main(command) == 130
     err = capsys.readouterr().err
     assert err == f"lapwrench {command[0]}: interrupted\n"
+
+
+def test_a_robot_description_that_cannot_be_used_is_one_line_and_exit_2(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A damaged installed description (or an arm spec pointing at a bad file) is the user's to fix: one
+    line naming the file, exit 2, not a traceback."""
+    import dataclasses
+
+    from lapwrench.robot.arms import ARM_SPECS, UrdfFile
+
+    bad = tmp_path / "arm.urdf"
+    bad.write_text("<robot name='x'><link name='a'/></robot>")
+    monkeypatch.setitem(ARM_SPECS, "panda", dataclasses.replace(ARM_SPECS["panda"], description=UrdfFile(bad)))
+    code, err = run_cli(["virtual", "--duration", "0.1", "--quiet", "--out", str(tmp_path / "out")], capsys)
+    assert code == 2
+    assert message_lines(err) == [f"lapwrench virtual: {bad}: no link 'panda_link0' (the panda spec's base or flange)"]

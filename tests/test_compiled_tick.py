@@ -14,11 +14,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lapwrench.compiled_tick import CueError
+from lapwrench.compiled_tick import CueError, ReadOnlyInputs
 from lapwrench.config import Config
 from lapwrench.controller import Controller
 from lapwrench.jit import jit_enabled
-from lapwrench.sensors import RobotReading, SensorFrame
+from lapwrench.sensors import (
+    ForceTorqueReading,
+    InputEvent,
+    InstrumentObservation,
+    RobotReading,
+    SensorFrame,
+    TactileReading,
+    ValidInputs,
+)
 from lapwrench.spatial import Wrench
 from lapwrench.virtual import home_pose
 from lapwrench.wrenches.base import Cue, TickContext
@@ -174,3 +182,93 @@ def test_python_cues_read_this_tick_and_what_the_tick_returns_outlives_the_next(
         np.testing.assert_array_equal(p_G_seen, r.p_G)  # the geometry of this tick
         assert s_star > 0.0  # the closest point's parameter, not the placeholder
     assert not np.array_equal(seen[0][1], seen[2][1])  # the ticks differed
+
+
+class Writer(Cue):
+    """A plugin cue that writes into one array of what it reads (``target``: a path from ``ctx``) after t = 0."""
+
+    def __init__(self, cfg: Config, target: str) -> None:
+        super().__init__("writer", None, cfg)
+        self.target = target
+
+    def compute(self, ctx: TickContext) -> Wrench:
+        if ctx.time > 0.0:
+            obj: object = ctx
+            for part in self.target.split("."):
+                obj = getattr(obj, part)
+            np.asarray(obj)[...] += 0.5  # type: ignore[index]
+        return Wrench.zero(ctx.geometry.p_G)
+
+
+def _full_frame(t: float, q: np.ndarray) -> SensorFrame:
+    z = np.zeros(3)
+    return SensorFrame(
+        t, ForceTorqueReading(np.array([1.0, 0.0, 0.0]), z.copy(), t), TactileReading(np.full(64, 50.0), t),
+        InstrumentObservation(np.array([[300.0, 200.0]]), t), RobotReading(q, np.zeros(q.shape[0]), z.copy(), t),
+    )
+
+
+@pytest.mark.parametrize("target", [
+    "kin.q", "kin.dq", "kin.M", "kin.J_E", "kin.p_C", "geometry.p_R", "geometry.J_G", "geometry.p_G",
+    "inputs.robot.q", "inputs.robot.external_force", "inputs.ft.force", "inputs.tactile.values",
+    "inputs.instruments.points",
+])
+def test_a_plugin_cannot_write_into_the_arrays_it_reads(cfg: Config, target: str) -> None:
+    """The tick's kinematics and geometry are what the motion stage reads after the cues, and the readings are
+    the sources' own arrays (the measured q is the supervisor's): a write is an error (the loop's alarm and stop
+    to rest), and changes none of them."""
+    ctrl = Controller(cfg, extra_cues=[Writer(cfg, target)])
+    q0 = home_pose(cfg.robot.kind)
+    ctrl.reset(q0)
+    assert ctrl.ref is not None
+    frame = _full_frame(0.001, q0.copy())
+    readings = [a.copy() for a in (frame.robot.q, frame.robot.external_force, frame.tactile.values,  # type: ignore[union-attr]
+                                   frame.instruments.points)]  # type: ignore[union-attr]
+    with pytest.raises(ValueError, match="read-only"):
+        ctrl.tick(frame)
+    after = (frame.robot.q, frame.robot.external_force, frame.tactile.values, frame.instruments.points)  # type: ignore[union-attr]
+    for before, now in zip(readings, after, strict=True):
+        np.testing.assert_array_equal(now, before)
+
+
+def test_a_plugin_writing_into_the_kinematics_stops_the_loop_without_a_jump(cfg: Config) -> None:
+    from lapwrench.virtual import run_virtual
+
+    ctrl = Controller(cfg, extra_cues=[Writer(cfg, "kin.q")])
+    _, log = run_virtual(cfg, duration=0.05, controller=ctrl)
+    assert log.alarm is not None and "read-only" in log.alarm
+    q = np.array([home_pose(cfg.robot.kind)] + [r.q_ref for r in log.results])
+    assert np.all(np.abs(np.diff(q, axis=0)) <= ctrl.model.limits.velocity * cfg.robot.dt)
+
+
+def test_the_cues_inputs_are_read_only_and_a_reading_handed_on_again_is_viewed_once() -> None:
+    view = ReadOnlyInputs()
+    tactile, points = TactileReading(np.full(64, 50.0), 0.0), InstrumentObservation(np.array([[1.0, 2.0]]), 0.0)
+    first = view(ValidInputs(tactile=tactile, instruments=points, events=[InputEvent(0.0, "ft", "stale")]))
+    second = view(ValidInputs(tactile=tactile, instruments=InstrumentObservation(np.array([[3.0, 4.0]]), 0.0)))
+    assert second.tactile is first.tactile and second.instruments is not first.instruments
+    assert first.tactile is not None and second.instruments is not None
+    assert not first.tactile.values.flags.writeable and not second.instruments.points.flags.writeable
+    np.testing.assert_array_equal(second.instruments.points, [[3.0, 4.0]])
+    assert tactile.values.flags.writeable  # the source's own array is left as it was
+    first.events.clear()  # a cue's copy of the events
+    assert view(ValidInputs(events=[InputEvent(0.0, "ft", "stale")])).events == [InputEvent(0.0, "ft", "stale")]
+
+
+@pytest.mark.parametrize("damping", [-10.0 * np.eye(6), np.eye(6) + 5.0 * np.fliplr(np.eye(6))],
+                         ids=["negative", "indefinite"])
+def test_a_plugin_damping_matrix_that_feeds_energy_in_is_dropped_and_reported(cfg: Config,
+                                                                               damping: np.ndarray) -> None:
+    from lapwrench.virtual import run_virtual
+
+    ctrl = Controller(cfg, extra_cues=[Hostile(cfg, Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), damping)])
+    _, log = run_virtual(cfg, duration=0.5, controller=ctrl)  # nobody touches the scope
+    q = np.array([r.q_ref for r in log.results])
+    assert log.alarm is None and np.abs(q - home_pose(cfg.robot.kind)).max() < 1e-6  # it stays where it is
+    assert any(e.source == "cues" and "positive semi-definite" in e.message for e in ctrl.events)
+
+
+def test_a_plugin_damping_matrix_that_is_semi_definite_is_used(cfg: Config) -> None:
+    n = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    _, events = _tick_with(Hostile(cfg, Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), 50.0 * np.outer(n, n)))
+    assert not [e for e in events if e.source == "cues"]

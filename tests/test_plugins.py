@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.metadata
+from pathlib import Path
 
 import pytest
 
@@ -49,3 +50,23 @@ def test_names_are_lower_case_identifiers(name: str) -> None:
 @pytest.mark.parametrize("name", ["Tracking", "2zoom", "a-b", "", "x" * 41, "a b", "a\n"])
 def test_other_names_are_not(name: str) -> None:
     assert not plugins.NAME.match(name)
+
+
+def test_a_plugin_that_exits_while_it_imports_is_one_line_not_an_exit(monkeypatch: pytest.MonkeyPatch,
+                                                                       tmp_path: Path) -> None:
+    (tmp_path / "exits_on_import_xyz.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    ep = importlib.metadata.EntryPoint("exits", "exits_on_import_xyz:Cue", plugins.CUE_GROUP)
+    monkeypatch.setattr(importlib.metadata, "entry_points", _fake_entry_points(ep))
+    with pytest.raises(plugins.PluginError, match=r"exits_on_import_xyz:Cue\) failed to load: SystemExit"):
+        plugins.load(plugins.CUE_GROUP, "exits")
+
+
+def test_a_plugin_import_error_of_many_lines_is_one_short_line(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    (tmp_path / "chatty_on_import_xyz.py").write_text("raise ImportError('first\\nsecond\\n' + 'x' * 5000)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    ep = importlib.metadata.EntryPoint("chatty", "chatty_on_import_xyz:Cue", plugins.CUE_GROUP)
+    monkeypatch.setattr(importlib.metadata, "entry_points", _fake_entry_points(ep))
+    with pytest.raises(plugins.PluginError, match="ImportError: first second x") as err:
+        plugins.load(plugins.CUE_GROUP, "chatty")
+    assert "\n" not in str(err.value) and len(str(err.value)) < 400

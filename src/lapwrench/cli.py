@@ -22,6 +22,7 @@ from lapwrench.cli_types import (
     int_in,
     output_dir,
 )
+from lapwrench.robot.errors import RobotDescriptionError
 
 MIN_VIRTUAL_SECONDS = 0.1  # enough ticks for the metrics and the plot
 MAX_VIRTUAL_SECONDS = 3600.0  # the virtual run keeps every tick in memory
@@ -295,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "virtual":
             return cmd_virtual(args)
         return int(args.func(args))
-    except (UsageError, config_mod.ConfigError) as exc:
+    except (UsageError, config_mod.ConfigError, RobotDescriptionError) as exc:
         print(f"lapwrench {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C in a command without its own handling (log-report, identify-grip...)

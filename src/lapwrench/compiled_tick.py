@@ -19,17 +19,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numpy as np
 
 from lapwrench.allocation import nullspace_wrench
+from lapwrench.inputs import Reading
 from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import MeasuredFeedback
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState
-from lapwrench.robot.model import KinematicTerms
-from lapwrench.sensors import ForceTorqueReading, ValidInputs
-from lapwrench.spatial import Mat, Vec, Wrench
+from lapwrench.rcm.geometry import TaskGeometry
+from lapwrench.robot.model import Kinematics, KinematicTerms
+from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, TactileReading, ValidInputs
+from lapwrench.spatial import Mat, Vec, Wrench, cholesky_factor
 from lapwrench.tick_core import SaturationInputs, tick_stage
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
@@ -114,6 +116,7 @@ class CompiledTick:
         self.task_cues = [c for c in self.cues if c.priority == "task"]
         self.cues_in_order = self.null_cues + self.task_cues  # the order of the rows of the stacked wrenches
         self.sat = SaturationInputs.allocate(params.q_lo.shape[0])
+        self.cue_inputs = ReadOnlyInputs()
 
     # -- arguments of fixed types --------------------------------------------------------------
     # the readings as they are: the validator hands on C-contiguous float64 arrays of the right shapes only
@@ -181,6 +184,11 @@ class CompiledTick:
             n = terms.q.shape[0]
             self._buf = np.zeros(front_size(n))  # the kinematics and geometry of the ticks with Python cues
             self._kin, self._geo = front_views(self._buf, n, 0.0)  # views of it, cut once
+            # the cues read read-only views of them: a plugin writing into ctx.kin.q (say) would change the
+            # motion stage's input, which reads the buffer back (a jump of the reference)
+            self._cue_kin, self._cue_geo = _read_only_tuple(self._kin), _read_only_tuple(self._geo)
+            if self.cues:  # the damping matrices' check (_checked_damping) compiled now, never in the loop
+                cholesky_factor(np.eye(6), np.empty((6, 6)), 0.0)
             f_args = (*self._front_args(terms, none, at_rest), self._buf)
             self._front_into = bind(front_into, *f_args)
             _, s_star, _ = self._front_into(*f_args)
@@ -228,8 +236,8 @@ class CompiledTick:
         e_R, p_R, p_G, F_lat, residual, force, torque = vec3  # row views of a new array: what outlives the tick
         if inputs.ft is not None:  # the cues and the motion stage read the hand's wrench (lapwrench.wrenches.ft_zero)
             inputs.ft = ForceTorqueReading(force, torque, inputs.ft.stamp)
-        geo = self._geo._replace(s_star=s_star)
-        extra = self._evaluate_cues(TickContext(t, self._kin, geo, inputs))
+        geo = self._cue_geo._replace(s_star=s_star)
+        extra = self._evaluate_cues(TickContext(t, self._cue_kin, geo, self.cue_inputs(inputs)))
         W, ref, at, delta, contacts, non_finite, admitted, saturated, clamped = self._motion_tail_from(
             *self._motion_args(s_star, inputs, extra, ddq_ref, stopping, R_E0, may_admit)
         )
@@ -246,12 +254,13 @@ class CompiledTick:
         """The Python cues this tick: the null-space wrenches with their points and summed damping, the
         task-space force at p_R, every wrench about p_G (eq 39) by name, and the telemetry.
 
-        What a plugin returns is checked: a non-finite wrench or damping matrix is dropped for this tick
+        What a plugin returns is checked: a non-finite wrench or damping matrix, or a damping matrix whose
+        symmetric part is not positive semi-definite (it would feed energy in), is dropped for this tick
         (zero, and a fault named in ``faults``), like a rejected sensor reading; anything that is not a
         wrench of 3-vectors, a 6 x 6 matrix or one number per telemetry field is a :class:`CueError`
         (the loop turns it into an alarm and a stop to rest).
         """
-        p_G = ctx.geometry.p_G
+        p_G = self._geo.p_G  # the cues read a read-only view of it
         faults: list[str] = []
         null = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.null_cues]
         task = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.task_cues]
@@ -278,6 +287,52 @@ class CompiledTick:
             {c.name: _checked_telemetry(c, c.telemetry(ctx, w))
              for c, w in zip(self.cues_in_order, checked, strict=True) if c.telemetry_fields},
             tuple(faults),
+        )
+
+
+_A = TypeVar("_A")
+
+
+def _read_only(a: _A) -> _A:
+    """A read-only view of ``a`` (``a`` itself when it is not an array)."""
+    if type(a) is not np.ndarray:
+        return a
+    v = a.view()
+    v.setflags(write=False)
+    return v
+
+
+_Views = TypeVar("_Views", Kinematics, TaskGeometry)
+
+
+def _read_only_tuple(t: _Views) -> _Views:
+    """The named tuple ``t`` with read-only views of its arrays."""
+    return t._make(_read_only(a) for a in t)
+
+
+class ReadOnlyInputs:
+    """The tick's inputs as the Python cues see them: read-only views of the readings (the arrays are the
+    sources' own, the measured joints the supervisor's, and the motion stage reads them after the cues) and
+    a copy of the events (the tick's result carries the list). A tactile or image reading handed on again
+    (the sources keep their latest between samples) is viewed once."""
+
+    def __init__(self) -> None:
+        self.last_tactile: tuple[TactileReading | None, TactileReading | None] = (None, None)
+        self.last_instruments: tuple[InstrumentObservation | None, InstrumentObservation | None] = (None, None)
+
+    def __call__(self, inputs: ValidInputs) -> ValidInputs:
+        ft, tac, obs, rob, ro = inputs.ft, inputs.tactile, inputs.instruments, inputs.robot, _read_only
+        if tac is not None and tac is not self.last_tactile[0]:
+            self.last_tactile = (tac, TactileReading(ro(tac.values), tac.stamp))
+        if obs is not None and obs is not self.last_instruments[0]:
+            self.last_instruments = (obs, InstrumentObservation(ro(obs.points), obs.stamp))
+        return ValidInputs(
+            None if ft is None else ForceTorqueReading(ro(ft.force), ro(ft.torque), ft.stamp),
+            None if tac is None else self.last_tactile[1],
+            None if obs is None else self.last_instruments[1],
+            None if rob is None else RobotReading(ro(rob.q), ro(rob.dq), ro(rob.external_force), rob.stamp),
+            list(inputs.events),
+            {k: Reading(ro(r.value), r.stamp) for k, r in inputs.extra.items()} if inputs.extra else {},
         )
 
 
@@ -319,6 +374,11 @@ def _checked_damping(cue: Cue, D: object, faults: list[str]) -> Mat:
         raise CueError(f"cue {cue.name!r}: damping_matrix must be 6 x 6, got shape {a.shape}")
     if not np.isfinite(a).all():
         faults.append(f"cue {cue.name!r}: non-finite damping matrix; dropped this tick")
+        return np.zeros((6, 6))
+    S = a + a.T  # its symmetric part (twice), nudged so that a semi-definite one factors
+    S.flat[::7] += 1e-9 * max(1.0, float(np.abs(S).max()))
+    if not cholesky_factor(S, np.empty((6, 6)), 0.0):  # -D J_G θ̇ with D not >= 0 feeds energy in: the arm moves
+        faults.append(f"cue {cue.name!r}: damping matrix not positive semi-definite; dropped this tick")
         return np.zeros((6, 6))
     return a
 

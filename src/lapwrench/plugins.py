@@ -52,5 +52,7 @@ def load(group: str, name: str) -> Any:
         raise PluginError(f"{kind} {name!r} is registered by more than one package: {sorted(ep.value for ep in eps)}")
     try:
         return eps[0].load()
-    except Exception as exc:  # a plugin's import error is the user's to see, in one line
-        raise PluginError(f"{kind} {name!r} ({eps[0].value}) failed to load: {type(exc).__name__}: {exc}") from exc
+    except (Exception, SystemExit) as exc:  # a plugin's import error is the user's to see, in one line (sys.exit too)
+        detail = " ".join(str(exc).split())
+        detail = detail if len(detail) <= 300 else detail[:297] + "..."
+        raise PluginError(f"{kind} {name!r} ({eps[0].value}) failed to load: {type(exc).__name__}: {detail}") from exc

@@ -37,8 +37,23 @@ FRAME_C = "lap_C"
 FRAME_TIP = "lap_tip"
 
 __all__ = [
-    "ARM_SPECS", "FRAME_C", "FRAME_E", "FRAME_GRIP", "FRAME_H", "FRAME_TIP", "MAX_JOINTS", "ROBOT_KINDS", "ArmSpec",
-    "RobotDescriptionError", "RobotKind", "ScopeGeometry", "arm_spec", "arm_urdf_path", "build_urdf",
+    "ARM_SPECS",
+    "FRAME_C",
+    "FRAME_E",
+    "FRAME_GRIP",
+    "FRAME_H",
+    "FRAME_TIP",
+    "MAX_JOINTS",
+    "MAX_URDF_BYTES",
+    "ROBOT_KINDS",
+    "ArmSpec",
+    "RobotDescriptionError",
+    "RobotKind",
+    "ScopeGeometry",
+    "arm_spec",
+    "arm_urdf_path",
+    "build_urdf",
+    "check_description",
 ]
 
 
@@ -106,6 +121,97 @@ def _resolve_mesh_paths(root: ET.Element, urdf_path: Path) -> None:
             mesh.set("filename", str(found))
         elif name and not Path(name).is_absolute():
             mesh.set("filename", str((urdf_path.parent / name).resolve()))
+
+
+MAX_URDF_BYTES = 4 * 1024 * 1024
+"""The largest robot description read (the shipped ones are 10-17 kB)."""
+_MOVING = ("revolute", "prismatic")  # one coordinate each (a continuous joint has two in Pinocchio)
+
+
+def _read_description(path: Path) -> ET.Element:
+    """The parsed URDF at ``path``; :class:`RobotDescriptionError` naming the file when it cannot be read."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_URDF_BYTES:
+            raise RobotDescriptionError(f"{path}: {size} bytes; a robot description is at most {MAX_URDF_BYTES}")
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise RobotDescriptionError(f"cannot parse {path}: {exc}") from exc
+    except OSError as exc:
+        raise RobotDescriptionError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    if root.tag != "robot":
+        raise RobotDescriptionError(f"{path}: the root element is <{root.tag[:40]}>, not a URDF's <robot>")
+    return root
+
+
+def _limit_problem(joint: ET.Element) -> str:
+    """What is wrong with a moving joint's ``<limit>`` ("" when nothing)."""
+    limit = joint.find("limit")
+    if limit is None:
+        return "has no <limit>"
+    values: dict[str, float] = {}
+    for key in ("lower", "upper", "velocity", "effort"):
+        try:
+            values[key] = float(limit.get(key, "nan"))
+        except ValueError:
+            values[key] = math.nan
+        if not math.isfinite(values[key]):
+            return f"limit {key}={limit.get(key, 'missing')[:20]!r} is not a finite number"
+    if not values["lower"] < values["upper"]:
+        return f"limit lower={values['lower']:g} is not below upper={values['upper']:g}"
+    for key in ("velocity", "effort"):
+        if not values[key] > 0.0:
+            return f"limit {key}={values[key]:g} is not positive"
+    return ""
+
+
+def check_description(root: ET.Element, path: Path, spec: ArmSpec) -> None:
+    """The arm's URDF (gripper removed) against its spec, before Pinocchio or MuJoCo reads it: one
+    :class:`RobotDescriptionError` naming the file and the first problem (a missing base or flange link,
+    a link with two parents (a loop), moving joints other than the spec's, a joint type other than
+    revolute/prismatic, a non-finite, swapped or non-positive limit, a mesh file that does not exist)."""
+    links = {link.get("name") for link in root.findall("link")}
+    for link in (spec.base_link, spec.mount.link):
+        if link not in links:
+            raise RobotDescriptionError(f"{path}: no link {link!r} (the {spec.name} spec's base or flange)")
+    parent_of: dict[str | None, str | None] = {}
+    moving: list[str] = []
+    for joint in root.findall("joint"):
+        full = str(joint.get("name"))
+        name = full[:60]  # quoted in the errors below
+        parent, child = joint.find("parent"), joint.find("child")
+        ends = (None if parent is None else parent.get("link"), None if child is None else child.get("link"))
+        if not all(end in links for end in ends):
+            raise RobotDescriptionError(f"{path}: joint {name!r} connects links that are not defined: "
+                                        f"{tuple(str(e)[:60] for e in ends)}")
+        if ends[1] in parent_of:
+            raise RobotDescriptionError(f"{path}: link {str(ends[1])[:60]!r} has more than one parent (a loop)")
+        parent_of[ends[1]] = ends[0]
+        kind = joint.get("type")
+        if kind == "fixed":
+            continue
+        if kind not in _MOVING:
+            raise RobotDescriptionError(f"{path}: joint {name!r} is {str(kind)[:20]!r}; an arm joint is revolute "
+                                        "or prismatic")
+        problem = _limit_problem(joint)
+        if problem:
+            raise RobotDescriptionError(f"{path}: joint {name!r} {problem}")
+        moving.append(full)
+    link: str | None = spec.mount.link
+    seen: set[str | None] = set()
+    while link in parent_of:  # up from the flange to the root
+        if link in seen:
+            raise RobotDescriptionError(f"{path}: the joints above link {str(link)[:60]!r} form a loop")
+        seen.add(link)
+        link = parent_of[link]
+    if sorted(moving) != sorted(spec.joint_names):
+        shown = [m[:60] for m in moving[:12]]
+        raise RobotDescriptionError(f"{path}: {len(moving)} moving joints {shown}; the {spec.name} spec "
+                                    f"has {spec.n_joints}: {list(spec.joint_names)}")
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename", "")
+        if not Path(name).is_file():
+            raise RobotDescriptionError(f"{path}: mesh file {name[:200]!r} does not exist")
 
 
 def _strip_below(root: ET.Element, keep_link: str) -> None:
@@ -178,13 +284,12 @@ def build_urdf(kind: RobotKind = "panda", scope: ScopeGeometry | None = None) ->
     """URDF text of the arm of ``kind`` without gripper, with the laparoscope on its flange."""
     scope = scope or ScopeGeometry()
     path = arm_urdf_path(kind)
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise RobotDescriptionError(f"cannot parse {path}: {exc}") from exc
-    mount = arm_spec(kind).mount
+    root = _read_description(path)
+    spec = arm_spec(kind)
+    mount = spec.mount
     _resolve_mesh_paths(root, path)
     _strip_below(root, mount.link)
+    check_description(root, path, spec)
     L = scope.length
     _add_link(root, FRAME_E, mount.link, mount.xyz, mount.rpy)
     _add_link(

@@ -18,6 +18,7 @@ from lapwrench.robot.description import (
     FRAME_C,
     FRAME_E,
     FRAME_H,
+    RobotDescriptionError,
     RobotKind,
     ScopeGeometry,
     build_urdf,
@@ -193,7 +194,11 @@ class RobotModel:
         self.spec = arm_spec(kind)  # ValueError (one line) for an arm that is not registered
         self.scope = scope or ScopeGeometry()
         self.urdf = build_urdf(kind, self.scope)
-        self.model = pin.buildModelFromXML(self.urdf)
+        try:
+            self.model = pin.buildModelFromXML(self.urdf)
+        except (ValueError, RuntimeError) as exc:  # after check_description's checks: Pinocchio's own refusal
+            raise RobotDescriptionError(f"{self.spec.urdf_path()}: Pinocchio cannot build the {kind} model "
+                                        f"({' '.join(str(exc).split())[:200]})") from exc
         self.data = self.model.createData()
         n = self.spec.n_joints
         if self.model.nq != n or self.model.nv != n:

@@ -95,7 +95,8 @@ class Cue:
 
     def damping_matrix(self, ctx: TickContext) -> Mat | None:
         """D (6 x 6) when the wrench is -D J_G θ̇ about p_G (a viscous term): the integrator then treats
-        it implicitly. None (default): the wrench is taken as it is."""
+        it implicitly. None (default): the wrench is taken as it is. Its symmetric part must be positive
+        semi-definite (damping takes energy out); another is dropped for the tick, with an event."""
         return None
 
     def telemetry(self, ctx: TickContext, wrench: Wrench) -> tuple[float, ...]:

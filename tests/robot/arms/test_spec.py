@@ -37,3 +37,12 @@ def test_a_limit_table_of_the_wrong_length_is_refused() -> None:
 def test_a_non_positive_command_period_is_refused() -> None:
     with pytest.raises(ValueError, match="command_period_s"):
         dataclasses.replace(ARM_SPECS["fr3"], command_period_s=0.0)
+
+
+@pytest.mark.parametrize("value", [0.0, -1.0, float("nan"), float("inf")])
+@pytest.mark.parametrize("table", ["velocity", "acceleration", "jerk", "torque"])
+def test_a_limit_that_is_not_finite_and_positive_is_refused(table: str, value: float) -> None:
+    spec = ARM_SPECS["panda"]
+    bad = dataclasses.replace(spec.limits, **{table: (value, *getattr(spec.limits, table)[1:])})
+    with pytest.raises(ValueError, match=f"limits.{table} must be finite positive numbers"):
+        dataclasses.replace(spec, limits=bad)

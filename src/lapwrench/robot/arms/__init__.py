@@ -16,6 +16,7 @@ from lapwrench.robot.arms.spec import (
     RobotDescriptionError,
     ScopeMount,
     SimLook,
+    UrdfFile,
 )
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 
@@ -40,5 +41,5 @@ def arm_spec(name: str) -> ArmSpec:
 
 __all__ = [
     "ARM_SPECS", "MAX_JOINTS", "ArmSpec", "JointLimitTable", "PackageUrdf", "RobotDescriptionError", "ScopeMount",
-    "SimLook", "arm_spec",
+    "SimLook", "UrdfFile", "arm_spec",
 ]

@@ -4,19 +4,21 @@ A robot is one spec (issue 13, "Robots as data", robosuite style): where its des
 its joints, the links that differ between descriptions, its limits with their published source, its
 start poses, the simulated joint servo, how it treats position commands, where the laparoscope
 mounts and whether lapwrench has a hardware driver for it. One short module per arm in this package
-defines one; :mod:`lapwrench.robot.arms` registers them. Nothing here imports the rest of lapwrench.
+defines one; :mod:`lapwrench.robot.arms` registers them. Nothing here imports the rest of lapwrench
+but its errors.
 """
 
 from __future__ import annotations
 
 import functools
 import importlib.metadata
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lapwrench.robot.errors import RobotDescriptionError
 
-class RobotDescriptionError(RuntimeError):
-    """The robot description could not be found or parsed."""
+__all__ = ["ArmSpec", "JointLimitTable", "PackageUrdf", "RobotDescriptionError", "ScopeMount", "SimLook", "UrdfFile"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +33,17 @@ class PackageUrdf:
         """The file's absolute path; :class:`RobotDescriptionError` naming the package if absent.
         Found once per process (:func:`_locate`): the package's file list has thousands of entries."""
         return _locate(self.distribution, self.suffix)
+
+
+@dataclass(frozen=True)
+class UrdfFile:
+    """A URDF file of one's own, by its path (its meshes relative to it or absolute)."""
+
+    file: Path
+
+    def path(self) -> Path:
+        """The file's path (read and checked by :func:`lapwrench.robot.description.build_urdf`)."""
+        return Path(self.file)
 
 
 @functools.cache
@@ -107,7 +120,7 @@ class ArmSpec:
     """
 
     name: str
-    description: PackageUrdf
+    description: PackageUrdf | UrdfFile
     joint_names: tuple[str, ...]
     base_link: str
     mount: ScopeMount
@@ -128,6 +141,10 @@ class ArmSpec:
         bad += [f"limits.{k}" for k in _PER_JOINT_LIMITS if len(getattr(self.limits, k)) != n]
         if bad:
             raise ValueError(f"{self.name}: {', '.join(bad)} need one value per joint ({n})")
+        for k in _PER_JOINT_LIMITS:
+            values = getattr(self.limits, k)
+            if not all(isinstance(v, int | float) and math.isfinite(v) and v > 0.0 for v in values):
+                raise ValueError(f"{self.name}: limits.{k} must be finite positive numbers, got {values!r}")
         if not self.command_period_s > 0.0:
             raise ValueError(f"{self.name}: command_period_s must be positive, got {self.command_period_s!r}")
 
