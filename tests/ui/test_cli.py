@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import socket
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -64,3 +67,23 @@ def test_a_bad_config_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.Capt
     err = capsys.readouterr().err.strip()
     assert err.startswith("lapwrench ui: --config") and "epsilon2" in err and len(err.splitlines()) == 1
     assert ui_main(parse(["--config", str(tmp_path / "missing.yaml"), "--port", "0"])) == 2
+
+
+def test_a_port_taken_after_the_check_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    """The page's port taken between the check and the start (here by the Foxglove server of the same
+    run): viser moved to the next free port silently ('serving http://127.0.0.1:8766'), so the page was
+    not where it was asked to be."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    # were the page served anyway, it would run until stopped: stop it as Ctrl-C would
+    stopper = threading.Timer(60.0, os.kill, (os.getpid(), signal.SIGINT))
+    stopper.start()
+    try:
+        code = ui_main(parse(["--port", str(port), "--foxglove", f"127.0.0.1:{port}"]))
+    finally:
+        stopper.cancel()
+    out, err = capsys.readouterr()
+    assert code == 2 and "serving" not in out
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"lapwrench ui: --host/--port 127.0.0.1:{port}: ") and "in use" in last

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
+from helpers import wait_until
 
 from lapwrench.config import Config
 from lapwrench.ui.controls import Controls, status_text
@@ -119,3 +123,102 @@ def test_a_drag_end_during_the_page_threads_pull_update_leaves_the_hand_released
         session.hand.set_gizmo = hand_set  # type: ignore[method-assign]
     assert not controls.dragging
     assert not np.any(session.hand.gizmo)
+
+
+class PageClient:
+    """A page as a browser's viser client is to the server, over a real WebSocket: it says hello with a
+    camera pose (viser counts a client as connected from then), finds the controls by label in what the
+    server sends, and sends the updates a page would (or a hostile one could)."""
+
+    def __init__(self, port: int) -> None:
+        import asyncio
+
+        self.loop = asyncio.new_event_loop()
+        self.port = port
+        self.uuids: dict[str, str] = {}
+        self.ws = self.loop.run_until_complete(self._connect())
+
+    async def _connect(self) -> Any:
+        import msgspec
+        import websockets
+        import zstandard
+
+        ws = await websockets.connect(f"ws://127.0.0.1:{self.port}", subprotocols=[f"viser-v{viser.__version__}"],
+                                      max_size=None)
+        await ws.send(msgspec.msgpack.encode({
+            "type": "ViewerCameraMessage", "wxyz": [1.0, 0, 0, 0], "position": [1.0, 0, 0], "fov": 1.0,
+            "near": 0.01, "far": 10.0, "image_height": 480, "image_width": 640, "look_at": [0.0, 0, 0],
+            "up_direction": [0.0, 0, 1]}))
+        while "Let go" not in self.uuids:  # the controls' messages, as the page gets them
+            raw = await asyncio.wait_for(ws.recv(), 30)
+            n = int.from_bytes(raw[8:16], "little")
+            for m in msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(raw[16:16 + n]))["messages"]:
+                if m["type"].startswith("Gui") and isinstance(m.get("props"), dict) and m["props"].get("label"):
+                    self.uuids[m["props"]["label"]] = m["uuid"]
+        self._drain = asyncio.ensure_future(self._read(ws), loop=self.loop)
+        return ws
+
+    @staticmethod
+    async def _read(ws: Any) -> None:
+        with contextlib.suppress(Exception):
+            while True:
+                await ws.recv()
+
+    def send(self, message: dict[str, Any]) -> None:
+        import msgspec
+
+        self.loop.run_until_complete(self.ws.send(msgspec.msgpack.encode(message)))
+        self.loop.run_until_complete(asyncio.sleep(0.05))  # the reader gets its turn
+
+    def set(self, label: str, value: object) -> None:
+        self.send({"type": "GuiUpdateMessage", "uuid": self.uuids[label], "updates": {"value": value}})
+
+    def close(self) -> None:
+        self.loop.run_until_complete(self.ws.close())
+        self._drain.cancel()
+        self.loop.close()
+
+
+def test_a_push_set_by_a_page_ends_when_that_page_closes_not_when_another_does(controls: Controls) -> None:
+    """A tab closed or reloaded mid-push: its push, torque and grip must not stay on the handle (they
+    did, for good: 'after tab closed: push 15.0 grip 30.0 hand force 15.0')."""
+    hand, port = controls.session.hand, int(controls.server.get_port())
+    watcher, pusher = PageClient(port), PageClient(port)
+    try:
+        pusher.set("grip", "high")
+        pusher.set("push (N)", 15.0)
+        pusher.set("torque about shaft (N m)", 0.5)
+        assert wait_until(lambda: hand.push_magnitude == 15.0 and hand.twist_torque == 0.5 and hand.grip_force > 0, 10)
+        watcher.close()  # a page that only watched: the hand stays as it is
+        assert wait_until(lambda: len(controls.server.get_clients()) == 1, 10)
+        assert hand.push_magnitude == 15.0 and hand.grip_force > 0
+    finally:
+        pusher.close()
+    assert wait_until(lambda: hand.push_magnitude == 0.0 and hand.twist_torque == 0.0 and hand.grip_force == 0.0, 10)
+    assert controls.magnitude.value == 0.0 and controls.torque.value == 0.0  # the page shows it let go
+    assert "let go" in controls.error.content
+
+
+def test_a_malformed_gizmo_position_never_pulls_and_the_gizmo_comes_back(controls: Controls) -> None:
+    """A page that sends a gizmo position of one number pulled with the full 30 N, and the page thread
+    then failed on every update ('could not broadcast input array from shape (3,) into shape (1,)');
+    a NaN position was never put back on the handle."""
+    session = controls.session
+    for _ in range(20):
+        session.step()
+    snap = session.snapshot
+    assert snap is not None
+    page = PageClient(int(controls.server.get_port()))
+    try:
+        for bad in ([1.0], [float("nan")] * 3):
+            page.send({"type": "TransformControlsDragStartMessage", "name": "/handle_gizmo"})
+            page.send({"type": "TransformControlsUpdateMessage", "name": "/handle_gizmo", "wxyz": [1.0, 0, 0, 0],
+                       "position": bad})
+            assert wait_until(lambda: "handle gizmo" in controls.error.content, 10)
+            assert not np.any(session.hand.gizmo) and not controls.dragging
+            controls.follow_handle(snap)  # the page thread's update: no error, the gizmo back on the handle
+            np.testing.assert_allclose(controls.gizmo.position, snap.hand_point, atol=1e-9)
+            page.send({"type": "TransformControlsDragEndMessage", "name": "/handle_gizmo"})
+            controls.show_error("")
+    finally:
+        page.close()

@@ -74,7 +74,7 @@ def test_hand_input_caps_its_total_force_and_keeps_the_last_good_values() -> Non
     assert np.linalg.norm(force) <= MAX_HAND_FORCE + 1e-9
     with pytest.raises(UiInputError):
         hand.set_push(float("nan"), 5.0)
-    assert (hand.push_azimuth_deg, hand.push_magnitude) == (30.0, 25.0)
+    assert (hand.push_azimuth_deg, hand.push_magnitude) == (30.0, 0.0)  # a bad push value lets go of the push
     with pytest.raises(UiInputError):
         hand.set_gizmo("not a vector")
     assert np.all(hand.gizmo == 0.0)  # a bad drag lets go of the gizmo
@@ -128,3 +128,16 @@ def test_the_hand_wrench_cache_follows_the_hand_and_the_shaft() -> None:
     hand.gizmo = np.array([5.0, 0.0, 0.0])  # even a field written directly counts
     assert cache.wrench(hand, turned)[2]
     assert cache.wrench(hand, turned, world=object())[2], "another world gets the hand again"
+
+
+def test_a_bad_push_direction_never_keeps_the_last_push_on() -> None:
+    """With a bad direction left on the page (NaN from a hostile page), lowering the magnitude to 0 was
+    refused ('push direction (deg): must be a finite number, got nan') and the 12 N push stayed on."""
+    hand = HandInput()
+    hand.set_push(0.0, 12.0)
+    for bad_azimuth, magnitude in ((float("nan"), 0.0), (float("nan"), 12.0), ("east", 5.0), (0.0, math.inf)):
+        hand.set_push(0.0, 12.0)
+        with pytest.raises(UiInputError):
+            hand.set_push(bad_azimuth, magnitude)
+        assert hand.push_magnitude == 0.0
+        assert hand.push_azimuth_deg == 0.0  # the direction keeps its last good value

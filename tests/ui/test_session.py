@@ -139,6 +139,20 @@ def test_a_parameter_change_is_applied_at_rest(session: Session, cfg: Config) ->
     assert session.held is None
 
 
+def test_a_reset_applies_accepted_parameters_not_yet_applied(session: Session, cfg: Config) -> None:
+    """Parameters accepted while the arm moved, then Reset: the reset dropped them silently, while the
+    page's parameter line turned to 'Parameters applied.' (it watches ``config_pending``)."""
+    session.request_config(cfg.replace(viscous={"k_t": 60.0}))
+    assert session.config_pending  # no tick yet: not applied
+    session.reset()
+    assert session.cfg.viscous.k_t == 60.0
+    assert session.closed.controller.cfg.viscous.k_t == 60.0
+    assert not session.config_pending
+    session.request_config(cfg.replace(viscous={"k_t": 70.0}))
+    session.reset(cfg.replace(viscous={"k_t": 80.0}))  # a configuration given to the reset wins
+    assert session.cfg.viscous.k_t == 80.0
+
+
 def test_a_hold_keeps_the_world_running_and_resume_restarts_the_loop(cfg: Config) -> None:
     session = Session(cfg.replace(safety={"max_rcm_error": 0.0001}), seed=2)
     session.hand.set_grip_level("high")

@@ -11,6 +11,8 @@ Neither steps the simulation, so a slow browser slows the page, not the control 
 
 from __future__ import annotations
 
+import errno
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -51,9 +53,16 @@ class UiApp:
         import viser
 
         self.options = opts = options or UiOptions()
-        self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
-        self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
         self.server = viser.ViserServer(host=opts.host, port=opts.port, label="lapwrench", verbose=False)
+        if opts.port and self.server.get_port() != opts.port:  # viser tries the next ports when one is taken
+            self.server.stop()
+            raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))
+        try:
+            self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
         # No shadows and no environment map (image-based lighting): in a browser without a GPU (software
         # WebGL) they cost most of each frame, and a busy browser takes the CPU the simulation needs.
         self.server.scene.configure_default_lights(True, cast_shadow=False)

@@ -2,6 +2,10 @@
 
 Every callback goes through :meth:`Controls.guarded`: a bad value (NaN from a slider, an unknown
 choice) or any other failure is shown on the page's error line and never reaches the sim thread.
+
+A push, a torque, a grip or a drag never outlives the page that set it: when a page that set the
+hand closes or reloads (its connection ends), the hand lets go (:meth:`Controls.client_left`). A
+gizmo position that is not three finite numbers ends the drag and puts the gizmo back on the handle.
 """
 
 from __future__ import annotations
@@ -12,7 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from lapwrench.ui.inputs import GIZMO_STIFFNESS, GRIP_LEVELS, MAX_DELTA, MAX_HAND_FORCE, MAX_HAND_TORQUE, UiInputError
+from lapwrench.ui.inputs import (
+    GIZMO_STIFFNESS,
+    GRIP_LEVELS,
+    MAX_DELTA,
+    MAX_HAND_FORCE,
+    MAX_HAND_TORQUE,
+    UiInputError,
+    checked_choice,
+)
 from lapwrench.ui.playback import PLAYABLE
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.session import DETECTORS, INSTRUMENT_REACH, Session, Snapshot
@@ -34,6 +46,15 @@ def status_text(snapshot: Snapshot | None, rtf: float, paused: bool, view_fps: f
             f" · RCM error {snapshot.rcm_error_mm:.2f} mm{held}{extra}{alarms}")
 
 
+def gizmo_position(value: object) -> np.ndarray | None:
+    """The gizmo's position as 3 finite floats, or None (a page can send anything)."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return v if v.shape == (3,) and bool(np.all(np.isfinite(v))) else None
+
+
 class Controls:
     """Builds the controls in ``gui`` and wires them to the session and the runner."""
 
@@ -51,10 +72,15 @@ class Controls:
         # hand's pull: one at a time, or a drag's end could be followed by the page thread's last pull and
         # leave the hand pulling after the release
         self._gizmo_lock = threading.RLock()
+        self.hand_clients: set[int] = set()  # the pages (client ids) that set the hand since it last let go
         self._build_hand(gui)
         self._build_instruments(gui)
         self._build_scenarios(gui)
-        self.gizmo = server.scene.add_transform_controls("/handle_gizmo", scale=GIZMO_SCALE, disable_rotations=True)
+        self.gizmo = self._add_gizmo()
+        server.on_client_disconnect(self.client_left)
+
+    def _add_gizmo(self) -> Any:
+        gizmo = self.server.scene.add_transform_controls("/handle_gizmo", scale=GIZMO_SCALE, disable_rotations=True)
         on_gizmo = self.guarded(self.gizmo_event)
 
         async def on_gizmo_in_order(event: Any) -> None:
@@ -62,7 +88,8 @@ class Controls:
             in a thread pool, where a late update could follow the end and leave the hand pushing)."""
             on_gizmo(event)
 
-        self.gizmo.on_update(on_gizmo_in_order)
+        gizmo.on_update(on_gizmo_in_order)
+        return gizmo
 
     def guarded(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
         """``fn`` with its errors shown on the page instead of raised."""
@@ -76,6 +103,31 @@ class Controls:
             else:
                 self.show_error("")
         return call
+
+    def by_hand(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """:meth:`guarded` ``fn`` for an input of the hand: the page that sent it is noted
+        (:meth:`client_left` lets go when it closes)."""
+        def call(event: Any) -> None:
+            self._note_client(event)
+            fn(event)
+        return self.guarded(call)
+
+    def _note_client(self, event: Any) -> None:
+        client_id = getattr(event, "client_id", None)
+        if client_id is not None:
+            with self._gizmo_lock:
+                self.hand_clients.add(int(client_id))
+
+    def client_left(self, client: Any) -> None:
+        """A page closed or reloaded (viser's disconnect callback): if it set the hand since the hand last
+        let go, the hand lets go, so no push, torque, grip or drag stays on without its page."""
+        with self._gizmo_lock:
+            if getattr(client, "client_id", None) not in self.hand_clients:
+                return
+            self.dragging = False
+            self.session.hand.set_gizmo(np.zeros(3))
+        self._let_go()
+        self.show_error("a page that was setting the hand closed: the hand let go")
 
     def show_error(self, message: str) -> None:
         text = f"**Error:** {message}" if message else ""
@@ -94,16 +146,18 @@ class Controls:
             self.release = gui.add_button("Let go")
             gui.add_markdown(f"Drag the gizmo at the handle: {GIZMO_STIFFNESS / 100:.0f} N per cm across the shaft, "
                              f"at most {MAX_HAND_FORCE:.0f} N. Arrows: hand red, trocar orange, cues by colour.")
-        self.grip.on_click(self.guarded(lambda e: hand.set_grip_level(e.target.value)))
+        self.grip.on_click(self.by_hand(lambda e: hand.set_grip_level(e.target.value)))
         k_H = lambda: self.session.cfg.interaction.k_H  # noqa: E731 - read when used: parameters change
-        self.delta.on_update(self.guarded(lambda e: hand.set_grip_delta(e.target.value, k_H())))
-        push = self.guarded(lambda _e: hand.set_push(self.azimuth.value, self.magnitude.value))
+        self.delta.on_update(self.by_hand(lambda e: hand.set_grip_delta(e.target.value, k_H())))
+        push = self.by_hand(lambda _e: hand.set_push(self.azimuth.value, self.magnitude.value))
         self.azimuth.on_update(push)
         self.magnitude.on_update(push)
-        self.torque.on_update(self.guarded(lambda e: hand.set_twist(e.target.value)))
+        self.torque.on_update(self.by_hand(lambda e: hand.set_twist(e.target.value)))
         self.release.on_click(self.guarded(lambda _e: self._let_go()))
 
     def _let_go(self) -> None:
+        with self._gizmo_lock:
+            self.hand_clients.clear()
         self.session.hand.release()
         self.magnitude.value = 0.0
         self.torque.value = 0.0
@@ -111,24 +165,37 @@ class Controls:
 
     def gizmo_event(self, event: Any) -> None:
         """A drag event of the handle gizmo (start, update or end; from viser): the hand's pull follows it."""
+        self._note_client(event)
         with self._gizmo_lock:
             snap = self.session.snapshot
-            if event.phase == "end" or snap is None:
+            position = gizmo_position(event.target.position)
+            if event.phase == "end" or snap is None or position is None:
                 self.dragging = False
                 self.session.hand.set_gizmo(np.zeros(3))
+                if position is None:  # follow_handle puts it back on the handle
+                    raise UiInputError(f"handle gizmo: a position must be 3 finite numbers, got "
+                                       f"{str(event.target.position)[:60]}")
                 return
             self.dragging = True
-            self.session.hand.set_gizmo(np.asarray(event.target.position, float) - snap.hand_point)
+            self.session.hand.set_gizmo(position - snap.hand_point)
 
     def follow_handle(self, snapshot: Snapshot) -> None:
         """Keep the gizmo on the handle while it is not dragged; while dragged, its pull follows the
         handle (a spring between the handle and the gizmo)."""
         with self._gizmo_lock:
-            if not self.dragging:
-                if np.max(np.abs(np.asarray(self.gizmo.position) - snapshot.hand_point)) > 1e-4:
+            position = gizmo_position(self.gizmo.position)
+            if position is None:  # a page sent a bad position: the drag ends, the gizmo goes back
+                self.dragging = False
+                self.session.hand.set_gizmo(np.zeros(3))
+                if np.shape(self.gizmo.position) != (3,):  # its position can no longer be set: a new gizmo
+                    self.gizmo.remove()
+                    self.gizmo = self._add_gizmo()
+                self.gizmo.position = snapshot.hand_point
+            elif not self.dragging:
+                if np.max(np.abs(position - snapshot.hand_point)) > 1e-4:
                     self.gizmo.position = snapshot.hand_point
             else:
-                self.session.hand.set_gizmo(np.asarray(self.gizmo.position, float) - snapshot.hand_point)
+                self.session.hand.set_gizmo(position - snapshot.hand_point)
 
     # -- instruments --------------------------------------------------------------------------
     def _build_instruments(self, gui: Any) -> None:
@@ -145,8 +212,7 @@ class Controls:
                     h.on_update(update)
                 self.instrument_inputs.append((shown, x, y))
             self.detector = gui.add_dropdown("detector (resets)", DETECTORS, initial_value=self.session.detector)
-        self.detector.on_update(self.guarded(lambda e: self._in_background(
-            lambda: self._reset(detector=e.target.value))))
+        self.detector.on_update(self.guarded(lambda e: self._reset_with(e.target.value)))
 
     # -- scenarios ----------------------------------------------------------------------------
     def _build_scenarios(self, gui: Any) -> None:
@@ -164,6 +230,12 @@ class Controls:
         self.stop_script.on_click(self.guarded(lambda _e: self.session.stop_script()))
         self.pause.on_click(self.guarded(lambda _e: self._toggle_pause()))
         self.reset.on_click(self.guarded(lambda _e: self._in_background(self._reset)))
+
+    def _reset_with(self, detector: object) -> None:
+        """Reset with another detector, checked here (an error raised in the background could be
+        overwritten on the page by this callback's success)."""
+        choice = checked_choice(detector, "detector", DETECTORS)
+        self._in_background(lambda: self._reset(detector=choice))
 
     def _toggle_pause(self) -> None:
         self.runner.paused = not self.runner.paused

@@ -138,8 +138,14 @@ class HandInput:
         self.grip_force = grip_force_for_delta(checked_number(delta, "grip δ", 0.0, MAX_DELTA), k_H)
 
     def set_push(self, azimuth_deg: object, magnitude: object) -> None:
-        a = checked_number(azimuth_deg, "push direction (deg)", -360.0, 360.0)
-        m = checked_number(magnitude, "push magnitude (N)", 0.0, MAX_HAND_FORCE)
+        """Push ``magnitude`` N at ``azimuth_deg``; a bad value of either lets go of the push (else a bad
+        direction left on the page would keep the last push on, however the magnitude is lowered)."""
+        try:
+            a = checked_number(azimuth_deg, "push direction (deg)", -360.0, 360.0)
+            m = checked_number(magnitude, "push magnitude (N)", 0.0, MAX_HAND_FORCE)
+        except UiInputError:
+            self.push_magnitude = 0.0
+            raise
         self.push_azimuth_deg, self.push_magnitude = a, m
 
     def set_twist(self, torque: object) -> None:

@@ -207,15 +207,18 @@ class Session:
             self._req.config = (cfg, controller)
 
     def reset(self, cfg: Config | None = None, detector: str | None = None) -> None:
-        """A fresh world and controller (the same configuration unless given); the inputs are kept.
-        Built in the caller's thread, swapped in under the lock."""
+        """A fresh world and controller (the same configuration unless given; parameters accepted but not
+        yet applied are applied by it); the inputs are kept. Built in the caller's thread, swapped in
+        under the lock."""
         det = self.detector if detector is None else checked_choice(detector, "detector", DETECTORS)
-        closed = build_loop(cfg or self.cfg, self.seed, det)
+        pending = self._req.config  # accepted parameters not yet applied: the fresh world starts with them
+        closed = build_loop(cfg or (self.cfg if pending is None else pending[0]), self.seed, det)
         with self.lock:
             old, self.closed, self.detector = self.closed, closed, det
             self.held, self.alarms, self._last, self.snapshot = None, [], None, None
             self._disturbance = self._script = None
-            self._req, self.max_rcm_error = _Requests(), 0.0
+            later = self._req.config if self._req.config is not pending else None  # asked during the build
+            self._req, self.max_rcm_error = _Requests(config=later), 0.0
             self.history.clear()
         old.world.close()
 
