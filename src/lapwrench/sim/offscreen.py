@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import os
 import weakref
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
@@ -147,6 +148,17 @@ def make_renderer(model: mujoco.MjModel, width: int, height: int) -> mujoco.Rend
     r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
     r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
     return r
+
+
+def release_context() -> None:
+    """Leave no GL context current on this thread. MuJoCo's renderer makes its context current when it is
+    built and when it draws, and leaves it so; with EGL a context current on one thread can be neither
+    drawn with nor freed on another (EGL_BAD_ACCESS): ``ui --foxglove`` draws the live view on the sim
+    thread and closes the world on the main thread. Other back ends keep their own rules."""
+    if os.environ.get("MUJOCO_GL") == "egl":
+        from mujoco.egl import EGL
+
+        EGL.eglReleaseThread()
 
 
 def scope_view_option() -> mujoco.MjvOption:

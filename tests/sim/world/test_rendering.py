@@ -23,3 +23,23 @@ def test_render_laparoscope_frame(panda_scene: Scene) -> None:
         assert panda_scene.model.camera(CAMERA_NAME).id >= 0
     finally:
         w.close()
+
+
+def test_a_world_drawn_on_one_thread_closes_on_another(panda_scene: Scene) -> None:
+    """``ui --foxglove`` draws the live view on the sim thread and closes the world on the main thread
+    (Ctrl-C, or a reset from the page): MuJoCo's renderer leaves its GL context current on the thread
+    that drew, and freeing it from another thread failed with EGL_BAD_ACCESS, a traceback at exit."""
+    import threading
+
+    w = make_renderable_world(panda_scene)
+    images: list[np.ndarray] = []
+    drawer = threading.Thread(target=lambda: images.append(w.render()))
+    drawer.start()
+    drawer.join()
+    w.close()  # another thread than the one that drew
+    assert images[0].shape == (480, 640, 3)
+    again = make_renderable_world(panda_scene)  # and this thread can still draw
+    try:
+        assert again.render().std() > 10.0
+    finally:
+        again.close()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from lapwrench.sim.offscreen import make_renderer
+from lapwrench.sim.offscreen import make_renderer, release_context
 from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.scene.names import CAMERA_NAME
 
@@ -41,7 +41,10 @@ class WorldRendering:
         if r is None:
             r = self._renderers[key] = make_renderer(self.model, w, h)
         r.update_scene(self.data, camera=camera, scene_option=self._scope_vopt if camera == CAMERA_NAME else None)
-        return r.render()
+        try:
+            return r.render()
+        finally:
+            release_context()  # any thread may draw or close the world next
 
     def render_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Copies of (qpos, mocap_pos, mocap_quat) at the last ``mj_forward``: the state :meth:`render`
