@@ -132,3 +132,59 @@ def test_lists_of_numbers_are_checked_element_by_element() -> None:
         config_ranges.check_value("a.w", [], tuple[float, ...], unit)
     with pytest.raises(ConfigError, match=r"'a\.v\[2\]' must lie in"):
         config_ranges.check_value("a.v", [0, 0.5, 2], three, unit)
+
+
+# -- checks between keys (a config audit: each of these passed validation and then held, stopped or diverged) --
+@pytest.mark.parametrize(
+    ("data", "key"),
+    [
+        # tip 14.5 mm beyond p_R at the start, below depth_min 30 mm: the supervisor held on the first tick
+        ({"scope": {"lambda0": 0.95}}, "scope.lambda0"),
+        ({"scope": {"lambda0": 0.3}}, "scope.lambda0"),  # 203 mm, beyond depth_max 120 mm: the same hold
+        ({"envelope": {"depth_min": 0.06}}, "scope.lambda0"),  # the default start, 58 mm, now too shallow
+        # at depth_max the RCM point would lie 0.17 m from {E}, the handle 0.2 m: inside the incision
+        ({"scope": {"handle_offset": 0.2, "lambda0": 0.6}, "envelope": {"depth_max": 0.12}}, "envelope.depth_max"),
+    ],
+)
+def test_depths_the_scope_cannot_start_at_or_reach_safely_are_refused(data: dict, key: str) -> None:
+    with pytest.raises(ConfigError, match=re.escape(f"'{key}'")) as err:
+        from_dict(data)
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize(
+    ("data", "key"),
+    [
+        # 2 Hz: a 30 N push took the paper's gains to 77 mm of RCM error; 20 Hz: K_p 10000 took 4 mm to 14 mm
+        ({"robot": {"control_rate_hz": 2}}, "robot.control_rate_hz"),
+        ({"robot": {"control_rate_hz": 20}, "rcm": {"Kp": 10000, "Kd": 200}}, "robot.control_rate_hz"),
+        # the explicit step takes K_d at the old velocity: 2000 N s/m ran the joints to their limits and stopped
+        ({"motion": {"integrator": "explicit"}, "rcm": {"Kp": 2000, "Kd": 2000}}, "robot.control_rate_hz"),
+        # overdamped: 2.6 of 4 mm left after 3 s; K_p 1e-6 left all of it
+        ({"rcm": {"Kp": 300, "Kd": 2000}}, "rcm.Kp"),
+        ({"rcm": {"Kp": 1e-6}}, "rcm.Kp"),
+        # underdamped: K_d 1e-6 left 3.9 of 4 mm after 3 s (Panda); K_d 2 on the UR5 1.5 of 4 mm after 2 s
+        ({"rcm": {"Kd": 1e-6}}, "rcm.Kd"),
+        ({"rcm": {"Kd": 5.0}}, "rcm.Kd"),
+        # the null-space brake at 100 Hz with 5 ms: dt / stop_time = 2, it rings forever
+        ({"robot": {"control_rate_hz": 100}, "motion": {"stop_time": 0.005}}, "motion.stop_time"),
+    ],
+)
+def test_rcm_gains_and_brake_the_control_rate_cannot_integrate_are_refused(data: dict, key: str) -> None:
+    with pytest.raises(ConfigError, match=re.escape(f"'{key}'")) as err:
+        from_dict(data)
+    assert err.value.key == key
+
+
+def test_the_checks_between_keys_leave_the_paper_the_studies_and_the_tests_room() -> None:
+    """Corners of studies/tune.yaml's box, the rates the suite uses, and the limits of each new check."""
+    for kp in (1000.0, 8000.0):
+        for kd in (10.0, 100.0):
+            from_dict({"rcm": {"Kp": kp, "Kd": kd}})
+    for rate in (250, 500, 2000):
+        from_dict({"robot": {"control_rate_hz": rate}, "rcm": {"Kp": 10000, "Kd": 10}})
+    from_dict({"robot": {"control_rate_hz": 50}, "rcm": {"Kp": 10000, "Kd": 200}})  # converged in a virtual run
+    from_dict({"rcm": {"Kp": 20.0, "Kd": 20.0}})  # slowest pole exactly 1/s
+    from_dict({"robot": {"control_rate_hz": 1000}, "motion": {"stop_time": 0.005}})  # 5 ticks
+    from_dict({"scope": {"lambda0": 0.9}, "envelope": {"depth_min": 0.028}})  # starts at 29 mm
+    from_dict({"motion": {"integrator": "explicit"}})

@@ -73,7 +73,7 @@ def test_a_file_over_one_mebibyte_is_refused_without_reading_it_all(
         load(big)
     assert sizes == [config_yaml.MAX_BYTES + 1]
     monkeypatch.undo()
-    assert load(write_file(tmp_path, "# " + "x" * 100_000 + "\nrcm: {Kp: 1.0}\n")).rcm.Kp == 1.0
+    assert load(write_file(tmp_path, "# " + "x" * 100_000 + "\nrcm: {Kp: 100.0}\n")).rcm.Kp == 100.0
 
 
 def test_files_that_are_not_readable_text(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,11 +1,15 @@
-"""The range machinery of the configuration: the intervals every number must lie in, and the checking
-of each value read from YAML against its dataclass field.
+"""The range machinery of the configuration: the intervals every number must lie in, the checking
+of each value read from YAML against its dataclass field, and the checks between keys.
 
 :mod:`lapwrench.config` declares its sections with :func:`ranged` fields (``ranged("[lo, hi]",
 default, why)``, brackets closed, parentheses open); :func:`build` turns a nested mapping into
 those dataclasses, refusing unknown keys, wrong types, non-finite numbers and values outside their
 range with a :class:`ConfigError` naming the dotted key. Kept apart from the sections so that the
 rules of *how* a value is checked live in one place, and the sections read as data.
+
+:func:`check_consistency` checks what no single range can: ordered pairs (ε1 < ε2, ...), the start pose
+inside the envelope (:func:`check_depths`) and the RCM gains against the control rate's Euler step
+(:func:`check_rcm_dynamics`).
 """
 
 from __future__ import annotations
@@ -141,3 +145,95 @@ def build(cls: type, data: Any, prefix: str) -> Any:
         else:
             kwargs[name] = check_value(key, data[name], annotation, f.metadata.get("range"))
     return cls(**kwargs)
+
+
+# -- checks between keys ----------------------------------------------------------------------------------------
+# The lateral effective mass Λ = (J M⁻¹ Jᵀ)⁻¹ of the RCM task at p_R (J the lateral RCM task), over the shipped
+# arms, their home poses ± 0.3 rad and lambda0 in [0.5, 0.95]: 0.19 kg (xarm7) to 4.3 kg (ur5); Panda 0.36-1.9 kg.
+LIGHTEST_RCM_MASS = 0.15  # kg, below the lightest of them
+RCM_SETTLING_TIME = 1.0  # s, slowest time constant allowed for the RCM error to decay
+STOP_TICKS = 5  # motion.stop_time in control periods, at least
+
+
+def require(ok: bool, key: str, message: str) -> None:
+    """A :class:`ConfigError` naming ``key`` unless ``ok``."""
+    if not ok:
+        raise ConfigError(f"config key '{key}' {message}", key)
+
+
+def check_consistency(cfg: Any) -> None:
+    """Checks between the keys of a :class:`lapwrench.config.Config` (each key's own range is checked as it is
+    read): pairs that must be ordered, the start pose inside the envelope, and the discrete-time dynamics."""
+    t, a, s, c, env = cfg.tracking, cfg.adaptive_rcm, cfg.scope, cfg.camera, cfg.envelope
+    require(t.epsilon2 > t.epsilon1, "tracking.epsilon2",
+            f"({t.epsilon2}) must exceed 'tracking.epsilon1' ({t.epsilon1})")
+    diagonal = math.hypot(c.width, c.height)
+    require(t.F_sum_max >= t.F_max, "tracking.F_sum_max", f"({t.F_sum_max}) must be at least 'tracking.F_max' "
+            f"({t.F_max}): one instrument alone must reach F_max")
+    require(t.epsilon1 < diagonal, "tracking.epsilon1", f"({t.epsilon1} px) must be below the image diagonal "
+            f"({diagonal:.0f} px), or no instrument ever leaves the dead zone")
+    require(a.gamma2 > a.gamma1, "adaptive_rcm.gamma2", f"({a.gamma2}) must exceed 'adaptive_rcm.gamma1' ({a.gamma1})")
+    require(c.u0 < c.width, "camera.u0", f"({c.u0}) must lie inside the image width (0, {c.width})")
+    require(c.v0 < c.height, "camera.v0", f"({c.v0}) must lie inside the image height (0, {c.height})")
+    require(s.handle_offset < s.length, "scope.handle_offset", "must be shorter than 'scope.length'")
+    require(env.depth_min < env.depth_max, "envelope.depth_max",
+            f"({env.depth_max}) must exceed 'envelope.depth_min' ({env.depth_min})")
+    check_depths(cfg)
+    check_rcm_dynamics(cfg)
+
+
+def check_depths(cfg: Any) -> None:
+    """The scope's insertion depths against its geometry.
+
+    - The tip starts ``(1 - lambda0) L`` beyond the RCM point (eq 18 puts p_R at ``lambda0 L`` from {E}); outside
+      ``[depth_min, depth_max]`` the supervisor holds on the first tick (it checks the measured depth against that
+      range), so nothing could ever move: ``lambda0: 0.95`` starts at 14.5 mm, below the default 30 mm.
+    - At ``depth_max`` the RCM point lies ``L - depth_max`` from {E}; the handle, ``handle_offset`` from {E}, must
+      stay on the outside of it, or the envelope lets the hand push the handle into the incision.
+    """
+    s, env = cfg.scope, cfg.envelope
+    start = (1.0 - s.lambda0) * s.length
+    require(env.depth_min <= start <= env.depth_max, "scope.lambda0",
+            f"({s.lambda0}) starts the tip {start * 1e3:.1f} mm beyond the RCM point ((1 - lambda0) x 'scope.length'), "
+            f"outside the envelope's depth range [{env.depth_min * 1e3:.1f}, {env.depth_max * 1e3:.1f}] mm "
+            "('envelope.depth_min', 'envelope.depth_max'): the supervisor would hold before anything moves")
+    require(env.depth_max < s.length - s.handle_offset, "envelope.depth_max",
+            f"({env.depth_max} m) must be shorter than 'scope.length' less 'scope.handle_offset' "
+            f"({s.length - s.handle_offset:.3f} m): deeper, the handle enters the incision")
+
+
+def check_rcm_dynamics(cfg: Any) -> None:
+    """The RCM task and the brake as the 1 kHz (``robot.control_rate_hz``) integration of the virtual model sees them.
+
+    Across the shaft the RCM error obeys Λ ë = -K_p e - K_d ė, Λ the task's effective mass (0.19-4.3 kg on the
+    shipped arms, :data:`LIGHTEST_RCM_MASS`), integrated by Euler steps of dt = 1/rate (eq 1):
+
+    - ``semi_implicit`` takes K_d at the new velocity; the step's spectral radius is below 1 iff
+      dt² K_p < 4 Λ + 2 dt K_d. Required with half that margin at the lightest mass: dt² K_p <= 2 Λ + dt K_d
+      (at 20 Hz, K_p 10000 and K_d 200 took a 4 mm error to 14 mm and a hold; at 2 Hz the paper's gains took a
+      30 N push to 77 mm).
+    - ``explicit`` takes K_d at the old velocity: stable iff dt K_d < 2 Λ and dt² K_p < 4 Λ - 2 dt K_d; required
+      dt² K_p + dt K_d <= 2 Λ (K_d 2000 at 1 kHz ran the joints up to the limits and stopped the arm).
+    - Overdamped, the slowest pole is about K_p / K_d: below 1/:data:`RCM_SETTLING_TIME` the RCM error lingers
+      (K_p 300 with K_d 2000 left 2.6 of 4 mm after 3 s). The underdamped decay rate K_d / 2Λ is the range of
+      ``rcm.Kd``.
+    - The null-space brake ``a = -θ̇_null / stop_time`` is an explicit step: it rings at dt/stop_time > 1 and
+      diverges beyond 2; ``motion.stop_time`` must span :data:`STOP_TICKS` control periods.
+    """
+    rate, rcm, m = cfg.robot.control_rate_hz, cfg.rcm, LIGHTEST_RCM_MASS
+    dt = 1.0 / rate
+    if cfg.motion.integrator == "explicit":
+        ok, bound = dt * dt * rcm.Kp + dt * rcm.Kd <= 2.0 * m, "dt^2 Kp + dt Kd <= 2 x"
+    else:
+        ok, bound = dt * dt * rcm.Kp <= 2.0 * m + dt * rcm.Kd, "dt^2 Kp - dt Kd <= 2 x"
+    require(ok, "robot.control_rate_hz",
+            f"({rate:g} Hz) is too slow for 'rcm.Kp' ({rcm.Kp:g} N/m) and 'rcm.Kd' ({rcm.Kd:g} N s/m) with the "
+            f"{cfg.motion.integrator} step: the RCM task's Euler step needs {bound} {m} kg (the lightest arm's "
+            "mass at the RCM point), or the RCM error grows")
+    require(rcm.Kp >= rcm.Kd / RCM_SETTLING_TIME, "rcm.Kp",
+            f"({rcm.Kp:g} N/m) is too soft for 'rcm.Kd' ({rcm.Kd:g} N s/m): the RCM error decays at Kp/Kd = "
+            f"{rcm.Kp / rcm.Kd:.3g}/s, slower than 1/{RCM_SETTLING_TIME:g} s; raise Kp to at least Kd x 1/s")
+    stop = cfg.motion.stop_time
+    require(stop * rate >= STOP_TICKS, "motion.stop_time",
+            f"({stop:g} s) must span at least {STOP_TICKS} control periods of 'robot.control_rate_hz' ({rate:g} Hz), "
+            f"{STOP_TICKS / rate:g} s: the null-space brake is an explicit step that rings or diverges when shorter")

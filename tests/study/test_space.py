@@ -311,8 +311,8 @@ def test_check_dist_refuses_an_unclipped_normal_side_that_reaches_out_of_range()
     with pytest.raises(SpaceError, match="without min can draw"):
         check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000]}))
     with pytest.raises(SpaceError, match="without max can draw"):
-        check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 10}))
-    check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 10, "max": 9000}))
+        check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 50}))
+    check_dist(base, "rcm.Kp", parse_dist("rcm.Kp", {"normal": [300, 1000], "min": 50, "max": 9000}))
 
 
 def test_check_dist_accepts_an_unclipped_normal_that_stays_in_range() -> None:
