@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -113,3 +114,37 @@ def thread_policy(tid: int = 0) -> tuple[int, int]:
     if not hasattr(os, "sched_getscheduler"):
         return (0, 0)
     return os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK, os.sched_getparam(tid).sched_priority
+
+
+@contextlib.contextmanager
+def kernel_arrival_stamps(timeout: float = 5.0) -> Iterator[None]:
+    """While the block runs, Linux stamps every datagram as it arrives (``SO_TIMESTAMPNS``).
+
+    The kernel switches arrival stamping on lazily: the first socket that asks for it schedules a
+    deferred work item, and until that has run a datagram is stamped when it is *read* (on a busy
+    machine, for tens of ms). A socket of this helper keeps stamping on for the block (closing the
+    last such socket switches it off again, as lazily), after a probe datagram has come back stamped
+    with its arrival."""
+    import socket
+
+    from lapwrench.drivers import arrival
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.bind(("127.0.0.1", 0))
+        tx.connect(rx.getsockname())
+        assert arrival.enable(rx)
+        deadline = time.monotonic() + timeout
+        while True:
+            tx.send(b"probe")
+            time.sleep(0.02)
+            _, stamp = arrival.recv_stamped(rx, 64)
+            if stamp is not None and time.time() - stamp >= 0.015:
+                break
+            if time.monotonic() > deadline:
+                pytest.fail(f"the kernel did not stamp datagrams on arrival within {timeout} s")
+        yield
+    finally:
+        rx.close()
+        tx.close()

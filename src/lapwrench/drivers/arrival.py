@@ -8,7 +8,10 @@ dropped the newer ones, so the newest datagram read can be hundreds of milliseco
 The kernel stamps every datagram as it arrives. :func:`enable` asks for that stamp, :func:`recv_stamped`
 reads it with the datagram (``recvmsg`` ancillary data), and :func:`on_clock` puts it on the reader's
 clock: arrival = now - (wall-clock now - kernel stamp). Where the kernel gives no stamp (not Linux, the
-option refused), the read time stands, as before.
+option refused), the read time stands, as before. Linux switches arrival stamping on lazily: the first
+socket that asks schedules a deferred work item, and until it has run (on a busy machine, tens of ms)
+a datagram is stamped when it is read, i.e. as before; the F/T drivers open their socket, tare and
+start before the loop reads them, so the loop sees arrival stamps.
 """
 
 from __future__ import annotations
