@@ -346,3 +346,26 @@ def test_a_robot_description_that_cannot_be_used_is_one_line_and_exit_2(
     code, err = run_cli(["virtual", "--duration", "0.1", "--quiet", "--out", str(tmp_path / "out")], capsys)
     assert code == 2
     assert message_lines(err) == [f"lapwrench virtual: {bad}: no link 'panda_link0' (the panda spec's base or flange)"]
+
+
+def test_a_plugin_cue_that_fails_while_the_controller_is_built_is_one_line_naming_it(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The controller's warm-up tick runs every cue before anything moves: a plugin that raises there is the
+    user's to fix, one line naming the cue and what it raised, exit 2 (it was the plugin's own traceback)."""
+    import fake_plugins
+
+    from lapwrench import plugins
+    from lapwrench.wrenches.base import Cue, TickContext
+
+    class Broken(Cue):
+        def compute(self, ctx: TickContext) -> object:
+            raise ZeroDivisionError("division by zero")
+
+    fake_plugins.install(monkeypatch)
+    monkeypatch.setitem(fake_plugins.FAKE[plugins.CUE_GROUP], "broken", Broken)
+    (tmp_path / "c.yaml").write_text("cues:\n  broken: {}\n")
+    code, err = run_cli(["virtual", "--config", str(tmp_path / "c.yaml"), "--duration", "0.1", "--quiet", "--out",
+                         str(tmp_path / "out")], capsys)
+    assert code == 2
+    assert message_lines(err) == ["lapwrench virtual: cue 'broken' compute: ZeroDivisionError: division by zero"]

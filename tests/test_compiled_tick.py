@@ -134,7 +134,7 @@ def test_a_malformed_plugin_output_is_a_cue_error(cfg: Config, value: object, da
 
 
 def test_a_plugin_that_fails_at_once_fails_the_build_before_anything_moves(cfg: Config) -> None:
-    with pytest.raises(ValueError, match="boom"):
+    with pytest.raises(CueError, match="cue 'hostile' compute: ValueError: boom"):  # the plugin named
         Controller(cfg, extra_cues=[Hostile(cfg, ValueError("boom"))])  # the warm-up tick runs every cue
 
 
@@ -145,7 +145,7 @@ def test_an_exception_in_a_plugin_reaches_the_loop_which_stops_to_rest(cfg: Conf
     cue.raise_after = 0.05
     ctrl = Controller(cfg, extra_cues=[cue])
     _, log = run_virtual(cfg, duration=0.2, controller=ctrl)
-    assert log.alarm is not None and "boom" in log.alarm
+    assert log.alarm is not None and "cue 'hostile' compute: ValueError: boom" in log.alarm
 
 
 class Recorder(Cue):
@@ -224,7 +224,7 @@ def test_a_plugin_cannot_write_into_the_arrays_it_reads(cfg: Config, target: str
     frame = _full_frame(0.001, q0.copy())
     readings = [a.copy() for a in (frame.robot.q, frame.robot.external_force, frame.tactile.values,  # type: ignore[union-attr]
                                    frame.instruments.points)]  # type: ignore[union-attr]
-    with pytest.raises(ValueError, match="read-only"):
+    with pytest.raises(CueError, match="read-only"):
         ctrl.tick(frame)
     after = (frame.robot.q, frame.robot.external_force, frame.tactile.values, frame.instruments.points)  # type: ignore[union-attr]
     for before, now in zip(readings, after, strict=True):

@@ -22,6 +22,7 @@ from lapwrench.cli_types import (
     int_in,
     output_dir,
 )
+from lapwrench.plugins import CueError
 from lapwrench.robot.errors import RobotDescriptionError
 
 MIN_VIRTUAL_SECONDS = 0.1  # enough ticks for the metrics and the plot
@@ -296,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "virtual":
             return cmd_virtual(args)
         return int(args.func(args))
-    except (UsageError, config_mod.ConfigError, RobotDescriptionError) as exc:
+    except (UsageError, config_mod.ConfigError, RobotDescriptionError, CueError) as exc:
         print(f"lapwrench {args.command}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C in a command without its own handling (log-report, identify-grip...)

@@ -35,7 +35,7 @@ from lapwrench.spatial import Mat, Vec, Wrench, cholesky_factor
 from lapwrench.tick_core import SaturationInputs, tick_stage
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.tick_params import TickParams
-from lapwrench.wrenches.base import Cue, TickContext
+from lapwrench.wrenches.base import Cue, CueError, TickContext, call_cue
 from lapwrench.wrenches.ft_zero import FtTare
 
 
@@ -262,11 +262,11 @@ class CompiledTick:
         """
         p_G = self._geo.p_G  # the cues read a read-only view of it
         faults: list[str] = []
-        null = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.null_cues]
-        task = [_checked_wrench(c, c.compute(ctx), p_G, faults) for c in self.task_cues]
+        null = [_checked_wrench(c, call_cue(c, "compute", ctx), p_G, faults) for c in self.null_cues]
+        task = [_checked_wrench(c, call_cue(c, "compute", ctx), p_G, faults) for c in self.task_cues]
         D = np.zeros((6, 6))
         for c in self.null_cues:
-            Dc = c.damping_matrix(ctx)
+            Dc = call_cue(c, "damping_matrix", ctx)
             if Dc is not None:
                 D += _checked_damping(c, Dc, faults)
         task_F = np.zeros(3)
@@ -284,7 +284,7 @@ class CompiledTick:
             D,
             task_F,
             {c.name: about(W[i:i + 1], points[i:i + 1], p_G) for i, c in enumerate(self.cues_in_order)},
-            {c.name: _checked_telemetry(c, c.telemetry(ctx, w))
+            {c.name: _checked_telemetry(c, call_cue(c, "telemetry", ctx, w))
              for c, w in zip(self.cues_in_order, checked, strict=True) if c.telemetry_fields},
             tuple(faults),
         )
@@ -334,10 +334,6 @@ class ReadOnlyInputs:
             list(inputs.events),
             {k: Reading(ro(r.value), r.stamp) for k, r in inputs.extra.items()} if inputs.extra else {},
         )
-
-
-class CueError(RuntimeError):
-    """A cue returned something that is not what the :class:`~lapwrench.wrenches.base.Cue` interface promises."""
 
 
 def _vec3(x: object) -> Vec | None:

@@ -29,6 +29,12 @@ NAME = re.compile(r"[a-z][a-z0-9_]{0,39}\Z")  # \Z, not $: "a\n" is no name
 becomes a log channel, a column and a YAML key)."""
 
 
+class CueError(RuntimeError):
+    """A cue failed, or returned something that is not what the :class:`~lapwrench.wrenches.base.Cue`
+    interface promises; the message names the cue (in a run, the loop's alarm and a stop to rest; while
+    the controller is built, one line from the CLI)."""
+
+
 class PluginError(LookupError):
     """A cue or input name that is not registered, or whose entry point fails to load."""
 

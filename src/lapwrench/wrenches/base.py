@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 from lapwrench.config import Config
+from lapwrench.plugins import CueError
 from lapwrench.rcm.geometry import TaskGeometry
 from lapwrench.robot.model import Kinematics
 from lapwrench.sensors import ValidInputs
@@ -105,3 +106,14 @@ class Cue:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r})"
+
+
+def call_cue(cue: Cue, method: str, *args: Any) -> Any:
+    """``cue.<method>(*args)``; an exception from a plugin's code is a :class:`CueError` naming the cue and
+    the method, the original chained (the alarm then says which plugin failed, not only what it raised)."""
+    try:
+        return getattr(cue, method)(*args)
+    except CueError:
+        raise
+    except Exception as exc:
+        raise CueError(f"cue {cue.name!r} {method}: {type(exc).__name__}: {exc}") from exc
