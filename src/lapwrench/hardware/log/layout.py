@@ -13,16 +13,20 @@ from __future__ import annotations
 import sys
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lapwrench.hardware.log.live import ROBOT_DESCRIPTION_TOPIC
 from lapwrench.hardware.log.topics import CYCLE_TOPIC, IMAGE_TOPIC, POSE_TOPIC, WRENCH_TOPIC
+
+if TYPE_CHECKING:
+    from foxglove.layouts import PlotSeries
 
 LAYOUT_FILE = "data/foxglove/lapwrench.json"
 PLOTTED_CUES = ("rcm", "interaction", "tracking", "viscous")
 AXES = ("x", "y", "z")
 
 
-def _series(path: str, label: str):  # type: ignore[no-untyped-def]
+def _series(path: str, label: str) -> PlotSeries:
     from foxglove.layouts import PlotSeries
 
     return PlotSeries(value=path, label=label, enabled=True, timestamp_method="receiveTime")
