@@ -130,6 +130,14 @@ def test_a_hold_cycle_starts_the_next_busy_time_afresh() -> None:
     loop.hold_cycle()  # outside the controller's cycles: the next cycle's busy time is measured from here
     loop.cycle()
     assert loop.supervisor.deadline_misses == 0
+    # nor does it carry the last cycle's busy time over: one slow hook is one miss, not two
+    slow = [0.06]
+    loop, _ = _loop(budget=0.05, wall_deadlines=True, after_command=lambda now: time.sleep(slow.pop() if slow else 0))
+    loop.cycle()
+    loop.cycle()  # its busy time holds the 60 ms hook after the first command
+    loop.hold_cycle()
+    loop.cycle()
+    assert loop.supervisor.deadline_misses == 1
 
 
 def test_a_quick_after_command_hook_is_no_deadline_miss() -> None:

@@ -232,7 +232,7 @@ class ControlLoop:
         q_cmd = self.supervisor.filter(t, reading.q, q_measured=reading.q)
         self.robot.command(q_cmd)
         self.flush_events()
-        self.last_reading, self._t_after = reading, None  # the next cycle's busy time starts afresh
+        self.last_reading, self._t_after, self._tail = reading, None, 0.0  # the next busy time starts afresh
         self.k += 1
         return q_cmd
 
