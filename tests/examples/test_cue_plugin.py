@@ -108,10 +108,12 @@ def test_on_the_robot_path_the_pedal_driver_feeds_the_cue_through_the_real_time_
 
     env = {**os.environ, "PYTHONPATH": str(site), "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     log = tmp_path / "run.mcap"
+    # the plugin's path is under test, not the machine's timing: a busy CI machine can miss 20 wall-clock
+    # deadlines in a row (the deadline alarm, exit 1, has tests of its own), so that stop is off here
     cmd = [sys.executable, "-m", "lapwrench.cli", "run", "--dry-run", "--duration", "6", "--log", str(log),
-           "--config", str(EXAMPLE / "pedal.yaml")]
+           "--config", str(EXAMPLE / "pedal.yaml"), "--max-misses", "0", "--rt-priority", "0"]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]  # the summary names an alarm
     assert "example pedal" in proc.stderr  # the driver is named among the devices
     cycles = read_log(log)[0]
     force = [sum(x * x for x in c["wrenches"]["pedal_home"][3:]) ** 0.5 for c in cycles]

@@ -210,18 +210,15 @@ def test_lapwrench_run_logs_the_cue_telemetry(in_process: bool, tmp_path: Path,
     both log the configured keep-out cue's distance and barrier every cycle."""
     cfg, log = tmp_path / "keep_out.yaml", tmp_path / "run.mcap"
     cfg.write_text("cues:\n  keep_out: {center: [0.9, 0.0, 0.1], radius: 0.05}\n")
-    argv = ["--dry-run", "--duration", "0.3", "--config", str(cfg), "--log", str(log)]
+    # the telemetry is under test, not the machine's timing: no stop on deadline misses in a row
+    argv = ["--dry-run", "--duration", "0.3", "--config", str(cfg), "--log", str(log), "--max-misses", "0"]
     p = argparse.ArgumentParser()
     hw.add_run_arguments(p)
     code = hw.run_main(p.parse_args(argv + (["--in-process"] if in_process else [])))
     contents = load_log(log)
     cycles = contents.cycles
-    if code != 0:  # a loaded machine: the in-process loop (wall-clock deadlines, no SCHED_FIFO child) may
-        # miss 20 deadlines in a row and stop to rest with the deadline alarm (the supervisor's own tests);
-        # the telemetry must still be in every cycle it logged
-        kinds = {e.get("kind") for e in contents.events}
-        assert in_process and code == 1 and "deadline" in kinds, (code, kinds, capsys.readouterr().err)
-    assert len(cycles) >= (250 if code == 0 else 20)
+    assert code == 0, capsys.readouterr().err
+    assert len(cycles) >= 250
     distance = np.array([c["telemetry"]["keep_out"]["distance"] for c in cycles])
     assert np.all(distance > 0.2) and np.all(distance < 0.6)  # the tip is far outside the zone
     assert {c["telemetry"]["keep_out"]["barrier"] for c in cycles} == {0.0}
