@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 
-from lapwrench.robot.model import RobotModel
+from lapwrench.robot.model import Kinematics, RobotModel
 
 if TYPE_CHECKING:
+    from lapwrench.robot.limits import JointLimits
     from lapwrench.sim.scene.build import Scene
     from lapwrench.sim.world import SimWorld
 
@@ -69,12 +70,12 @@ def numeric_jacobian(f: Callable[[np.ndarray], np.ndarray], q: np.ndarray, h: fl
     return np.stack(cols, axis=1)
 
 
-def kinematics_at_rest(model: RobotModel, q: np.ndarray):  # type: ignore[no-untyped-def]
+def kinematics_at_rest(model: RobotModel, q: np.ndarray) -> Kinematics:
     """The model's kinematics at ``q`` with zero joint velocity."""
     return model.kinematics(q, np.zeros(model.nv))
 
 
-def two_joint_limits():  # type: ignore[no-untyped-def]
+def two_joint_limits() -> JointLimits:
     """A made-up two-joint arm's limits (no robot description needed): parameters that follow the
     arm's joint count."""
     from lapwrench.robot.limits import JointLimits

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -32,7 +34,7 @@ from lapwrench import cli_types
          ["1.2.3.4.5:9", ":70000", ":-1", ":x", "a b:1", "[::1", "[::1]x", "host:", "[::1]:"]),
     ],
 )
-def test_argument_types(parse, good: dict, bad: list[str]) -> None:  # type: ignore[no-untyped-def]
+def test_argument_types(parse: Callable[[str], Any], good: dict, bad: list[str]) -> None:
     for text, want in good.items():
         assert parse(text) == want
     for text in bad:

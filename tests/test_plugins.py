@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.metadata
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,7 @@ def test_an_unknown_name_is_one_line_naming_what_is_installed() -> None:
     assert "warp_drive" in msg and "tracking" in msg and "\n" not in msg
 
 
-def _fake_entry_points(*eps: importlib.metadata.EntryPoint):  # type: ignore[no-untyped-def]
+def _fake_entry_points(*eps: importlib.metadata.EntryPoint) -> Callable[..., list[importlib.metadata.EntryPoint]]:
     return lambda group: [ep for ep in eps if ep.group == group]
 
 

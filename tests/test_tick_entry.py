@@ -9,6 +9,7 @@ import pytest
 from lapwrench.config import load
 from lapwrench.controller import Controller
 from lapwrench.rcm.adaptive import AdaptiveState
+from lapwrench.robot.model import KinematicTerms
 from lapwrench.tick_core import SaturationInputs, motion_tail, tick_front
 from lapwrench.tick_entry import front_into, front_size, front_views, motion_tail_from
 from lapwrench.virtual import home_pose
@@ -29,7 +30,7 @@ def test_the_views_are_disjoint_and_fill_the_buffer() -> None:
     assert np.count_nonzero(buf == -1.0) == 1 and np.count_nonzero(buf == -2.0) == 1  # views, not copies
 
 
-def _state():  # type: ignore[no-untyped-def]
+def _state() -> tuple[Controller, KinematicTerms, np.ndarray, np.ndarray]:
     """A controller after reset, and a tick's arguments up to the cues at a moved pose (every input on)."""
     cfg = load()
     ctrl = Controller(cfg)

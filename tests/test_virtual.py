@@ -8,10 +8,10 @@ import pytest
 from lapwrench.config import Config, load
 from lapwrench.controller import Controller
 from lapwrench.rcm.geometry import initial_rcm_point
-from lapwrench.virtual import DEFAULT_Q0, HandScript, limits_report, run_virtual
+from lapwrench.virtual import DEFAULT_Q0, HandScript, VirtualLog, limits_report, run_virtual
 
 
-def _assert_inside_limits(ctrl: Controller, log) -> None:
+def _assert_inside_limits(ctrl: Controller, log: VirtualLog) -> None:
     usage = limits_report(ctrl, log, DEFAULT_Q0)
     assert usage["position_excess"] == 0.0
     for k in ("velocity", "acceleration", "jerk"):

@@ -6,6 +6,7 @@ import os
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,7 +249,7 @@ def test_serial_reader_with_loop_url() -> None:
     assert not port.is_open
 
 
-def test_missing_serial_port_names_device(tmp_path) -> None:
+def test_missing_serial_port_names_device(tmp_path: Path) -> None:
     missing = str(tmp_path / "ttyNOPE")
     src = SerialTactileArray(missing)
     with pytest.raises(DeviceOpenError, match="ttyNOPE"):

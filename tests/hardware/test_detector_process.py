@@ -6,6 +6,7 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ SIZE = (64, 48)
 
 
 @pytest.fixture
-def bus():
+def bus() -> Iterator[Bus]:
     b = Bus.create(bus_layout())
     try:
         yield b

@@ -39,8 +39,10 @@ import pytest
 from hardware.support import MemoryLogger, Pushes, QdProbe, RobotTimeForce, pushed_force, rt_process, rt_spec
 
 from lapwrench.buffer import LatestValue
+from lapwrench.config import Config
 from lapwrench.drivers.tactile import TactileFrame
 from lapwrench.hardware.devices import SimulatedHexProcess
+from lapwrench.hardware.frankysim import FrankySimServer
 from lapwrench.hardware.rt import FtSpec, RtProcess, franka_factory
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
@@ -64,7 +66,7 @@ def axis_distance(model: RobotModel, q: np.ndarray, p_R: np.ndarray) -> float:
     return measure_scope(model, q, p_R).rcm_error
 
 
-def test_full_controller_on_frankysim_holds_the_rcm(frankysim, fr3_cfg) -> None:
+def test_full_controller_on_frankysim_holds_the_rcm(frankysim: FrankySimServer, fr3_cfg: Config) -> None:
     # The handle wrench travels the real path: loopback HEX box → UDP → the loop process's
     # OnRobotHexSensor, drained each cycle. The scripts run on robot time (the loop's cycle count,
     # published on the shared bus), not wall time: franky-sim falls behind real time under load,

@@ -14,6 +14,7 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -108,7 +109,7 @@ def test_sched_fifo_refused_gives_one_clear_message(monkeypatch: pytest.MonkeyPa
 
 
 @pytest.fixture
-def external_feeder():
+def external_feeder() -> Iterator[Callable[[RtProcess], Any]]:
     """A feeder process of its own (spawned), so that a test can kill or stop it."""
     procs: list[Any] = []
 

@@ -6,16 +6,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from lapwrench.config import load
+from lapwrench.config import Config, load
+from lapwrench.controller import Controller
 from lapwrench.motion.envelope import APPROACH_TIME, rate_row_bounds, roll_angle, wall_speed
 from lapwrench.robot.limits import limit_usage
-from lapwrench.virtual import DEFAULT_Q0, HandScript, run_virtual
+from lapwrench.virtual import DEFAULT_Q0, HandScript, VirtualLog, run_virtual
 
 CFG = load().replace(viscous={"k_t": 2.0, "k_f": 20.0})  # light damping: the hand reaches every wall fast
 ENV = CFG.envelope
 
 
-def _rates(ctrl, log) -> dict[str, np.ndarray]:  # type: ignore[no-untyped-def]
+def _rates(ctrl: Controller, log: VirtualLog) -> dict[str, np.ndarray]:
     """Depth (m), insertion speed (m/s), pivot speed (rad/s), roll (rad) and roll speed of each tick."""
     out: dict[str, list[float]] = {k: [] for k in ("depth", "insertion", "pivot", "roll", "roll_speed")}
     R0 = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7)).R_E
@@ -30,7 +31,9 @@ def _rates(ctrl, log) -> dict[str, np.ndarray]:  # type: ignore[no-untyped-def]
     return {k: np.array(v) for k, v in out.items()}
 
 
-def _run(force: np.ndarray, torque: np.ndarray | None = None, duration: float = 2.5, cfg=CFG):  # type: ignore[no-untyped-def]
+def _run(
+    force: np.ndarray, torque: np.ndarray | None = None, duration: float = 2.5, cfg: Config = CFG
+) -> tuple[Controller, VirtualLog, dict[str, np.ndarray]]:
     tau = np.zeros(3) if torque is None else torque
     hand = HandScript(force=lambda t: force, torque=lambda t: tau, delta=lambda t: 2.0)
     ctrl, log = run_virtual(cfg, duration, hand=hand)

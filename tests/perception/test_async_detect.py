@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ class FakeDetector:
         self.calls = 0
         self.delay = delay
 
-    def detect(self, image):
+    def detect(self, image: np.ndarray) -> list[Detection]:
         self.calls += 1
         if self.delay:
             time.sleep(self.delay)
@@ -41,12 +42,14 @@ def frame(k: int) -> np.ndarray:
     return f
 
 
-def run_loop(adet, seconds: float, frames=None):
+def run_loop(
+    adet: SimulatedAsyncDetector, seconds: float, frames: list[int] | None = None
+) -> tuple[list[tuple[float, InstrumentObservation]], int]:
     """1 kHz loop; returns per-tick (t, observation). Frame k is the k-th captured one."""
     out = []
     count = {"k": 0}
 
-    def render():
+    def render() -> np.ndarray:
         k = count["k"] if frames is None else frames[count["k"]]
         count["k"] += 1
         return frame(k)
@@ -58,7 +61,7 @@ def run_loop(adet, seconds: float, frames=None):
     return out, count["k"]
 
 
-def test_captures_at_25_fps_and_publishes_after_the_latency():
+def test_captures_at_25_fps_and_publishes_after_the_latency() -> None:
     det = FakeDetector()
     adet = SimulatedAsyncDetector(det, frame_rate=25.0, latency=0.03)
     ticks, n_frames = run_loop(adet, 0.2)
@@ -73,7 +76,7 @@ def test_captures_at_25_fps_and_publishes_after_the_latency():
     assert res.age(0.199) == pytest.approx(0.039)
 
 
-def test_latency_longer_than_the_frame_period_pipelines():
+def test_latency_longer_than_the_frame_period_pipelines() -> None:
     adet = SimulatedAsyncDetector(FakeDetector(), frame_rate=25.0, latency=0.1)
     ticks, _ = run_loop(adet, 0.25)
     by_t = {round(t * 1000): obs for t, obs in ticks}
@@ -82,21 +85,21 @@ def test_latency_longer_than_the_frame_period_pipelines():
     assert by_t[249].stamp == pytest.approx(0.12)  # available at 220 ms; 160's arrives at 260
 
 
-def test_no_detection_gives_empty_points_with_the_capture_stamp():
+def test_no_detection_gives_empty_points_with_the_capture_stamp() -> None:
     adet = SimulatedAsyncDetector(FakeDetector(), latency=0.0)
     adet.offer(0.0, frame(255))
     obs = adet.observation(0.0)
     assert obs.points.shape == (0, 2) and obs.stamp == 0.0
 
 
-def test_max_age_drops_stale_results():
+def test_max_age_drops_stale_results() -> None:
     adet = SimulatedAsyncDetector(FakeDetector(), latency=0.01, max_age=0.05)
     adet.offer(0.0, frame(3))
     assert adet.observation(0.02).points.shape == (1, 2)
     assert adet.observation(0.051).points.shape == (0, 2)  # camera stalled: older than max_age
 
 
-def test_controller_validator_drops_old_detections():
+def test_controller_validator_drops_old_detections() -> None:
     cfg = load()
     limits = RobotModel().limits  # not used for image points
     val = InputValidator(cfg.interaction, cfg.camera, limits, max_image_age=cfg.inputs.max_image_age)
@@ -109,7 +112,7 @@ def test_controller_validator_drops_old_detections():
     assert stale.instruments is None and "older than" in stale.events[0].message
 
 
-def test_measured_latency_is_the_compute_time():
+def test_measured_latency_is_the_compute_time() -> None:
     adet = SimulatedAsyncDetector(FakeDetector(delay=0.01), latency="measured")
     adet.offer(1.0, frame(0))
     assert adet.latest(1.0) is None
@@ -117,7 +120,7 @@ def test_measured_latency_is_the_compute_time():
     assert res.compute_time >= 0.009 and res.latency == pytest.approx(res.compute_time)
 
 
-def test_observation_type_and_reset():
+def test_observation_type_and_reset() -> None:
     adet = SimulatedAsyncDetector(FakeDetector(), latency=0.0)
     adet.offer(0.0, frame(0))
     assert isinstance(adet.observation(0.0), InstrumentObservation)
@@ -130,17 +133,17 @@ def test_observation_type_and_reset():
     [({"frame_rate": 0.0}, "frame_rate"), ({"latency": -0.1}, "latency"), ({"latency": "soon"}, "latency"),
      ({"max_age": 0.0}, "max_age")],
 )
-def test_bad_arguments(kwargs, match):
+def test_bad_arguments(kwargs: dict[str, Any], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         SimulatedAsyncDetector(FakeDetector(), **kwargs)
 
 
-def test_threaded_worker_stamps_capture_time_and_keeps_the_newest_frame():
+def test_threaded_worker_stamps_capture_time_and_keeps_the_newest_frame() -> None:
     det = FakeDetector(delay=0.05)
     clock_lock = threading.Lock()
     now = {"t": 10.0}
 
-    def clock():
+    def clock() -> float:
         with clock_lock:
             return now["t"]
 
@@ -159,11 +162,11 @@ def test_threaded_worker_stamps_capture_time_and_keeps_the_newest_frame():
         assert obs.stamp == pytest.approx(10.08)
 
 
-def test_threaded_worker_error_surfaces():
+def test_threaded_worker_error_surfaces() -> None:
     class Boom:
         config = DetectorConfig()
 
-        def detect(self, image):
+        def detect(self, image: np.ndarray) -> list[Detection]:
             raise RuntimeError("model exploded")
 
     adet = ThreadedAsyncDetector(Boom())

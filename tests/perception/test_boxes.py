@@ -23,7 +23,9 @@ from lapwrench.perception.boxes import PAD_VALUE, box_iou, fuse_boxes, mirror_bo
         ((481, 641), (640, 640), False, (640, 640), (0, 80)),
     ],
 )
-def test_letterbox_geometry(frame_hw, target, auto, expected_hw, pad):
+def test_letterbox_geometry(
+    frame_hw: tuple[int, int], target: tuple[int, int], auto: bool, expected_hw: tuple[int, int], pad: tuple[int, int]
+) -> None:
     img = np.full((*frame_hw, 3), 200, np.uint8)
     out, lb = letterbox(img, target, auto=auto)
     assert out.shape == (*expected_hw, 3)
@@ -34,7 +36,7 @@ def test_letterbox_geometry(frame_hw, target, auto, expected_hw, pad):
         assert (out[pad[1] + 2 : expected_hw[0] - pad[1] - 2] == 200).all()
 
 
-def test_letterbox_roundtrip():
+def test_letterbox_roundtrip() -> None:
     img = np.zeros((480, 640, 3), np.uint8)
     _, lb = letterbox(img, (416, 416))
     boxes = np.array([[0, 0, 640, 480], [100.5, 20.25, 300, 470]])
@@ -44,7 +46,7 @@ def test_letterbox_roundtrip():
     assert (x0, x1) == pytest.approx((0, 416)) and (y0, y1) == pytest.approx((52, 364))
 
 
-def test_nms_matches_brute_force():
+def test_nms_matches_brute_force() -> None:
     rng = np.random.default_rng(3)
     xy = rng.uniform(0, 200, (150, 2))
     wh = rng.uniform(10, 60, (150, 2))
@@ -59,13 +61,13 @@ def test_nms_matches_brute_force():
     assert keep.tolist() == ref
 
 
-def test_mirror_boxes_is_an_involution():
+def test_mirror_boxes_is_an_involution() -> None:
     boxes = np.array([[10.0, 5.0, 50.0, 25.0], [0.0, 0.0, 320.0, 10.0]])
     np.testing.assert_allclose(mirror_boxes(boxes, 320), [[270.0, 5.0, 310.0, 25.0], [0.0, 0.0, 320.0, 10.0]])
     np.testing.assert_allclose(mirror_boxes(mirror_boxes(boxes, 320), 320), boxes)
 
 
-def test_fuse_boxes_weights_overlapping_boxes_by_score():
+def test_fuse_boxes_weights_overlapping_boxes_by_score() -> None:
     boxes = np.array([[0.0, 0.0, 10.0, 10.0], [1.0, 0.0, 11.0, 10.0], [50.0, 50.0, 60.0, 60.0], [0.0, 0.0, 10.0, 9.0]])
     scores = np.array([0.6, 0.3, 0.9, 0.5])
     fused = fuse_boxes(boxes, scores, np.array([2, 0]), 0.55)
@@ -77,7 +79,7 @@ def test_fuse_boxes_weights_overlapping_boxes_by_score():
     np.testing.assert_allclose(fused[0], (0.6 * boxes[0] + 0.3 * boxes[1]) / 0.9)
 
 
-def test_nms_per_class_and_max_keep():
+def test_nms_per_class_and_max_keep() -> None:
     boxes = np.array([[0, 0, 10, 10], [1, 1, 11, 11], [0, 0, 10, 10]], float)
     scores = np.array([0.9, 0.8, 0.7])
     assert nms(boxes, scores, 0.5).tolist() == [0]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -47,7 +49,7 @@ def views() -> list[np.ndarray]:
     return render_views()
 
 
-def test_recovers_known_intrinsics(views):
+def test_recovers_known_intrinsics(views: list[np.ndarray]) -> None:
     res = calibrate_from_images(views, board=BOARD, square_size=SQUARE)
     assert (res.width, res.height) == (640, 480)
     assert res.fx == pytest.approx(FX, rel=0.01)
@@ -59,7 +61,7 @@ def test_recovers_known_intrinsics(views):
     assert len(res.per_view_errors) == len(POSES)
 
 
-def test_from_files_with_a_view_without_board(views, tmp_path):
+def test_from_files_with_a_view_without_board(views: list[np.ndarray], tmp_path: Path) -> None:
     paths = []
     for i, v in enumerate(views):
         p = tmp_path / f"view{i}.png"
@@ -72,7 +74,7 @@ def test_from_files_with_a_view_without_board(views, tmp_path):
     assert res.fx == pytest.approx(FX, rel=0.01)
 
 
-def test_writes_intrinsics_yaml(views, tmp_path):
+def test_writes_intrinsics_yaml(views: list[np.ndarray], tmp_path: Path) -> None:
     res = calibrate_from_images(views, board=BOARD, square_size=SQUARE)
     path = write_intrinsics_yaml(res, tmp_path / "sub" / "intrinsics.yaml")
     data = yaml.safe_load(path.read_text())
@@ -85,18 +87,18 @@ def test_writes_intrinsics_yaml(views, tmp_path):
     assert read_intrinsics_yaml(path)["camera"]["v0"] == pytest.approx(res.v0, abs=1e-3)
 
 
-def test_too_few_boards(views):
+def test_too_few_boards(views: list[np.ndarray]) -> None:
     blank = np.full((480, 640, 3), 128, np.uint8)
     with pytest.raises(CalibrationError, match="found in 2 of 4"):
         calibrate_from_images([views[0], views[1], blank, blank], board=BOARD, square_size=SQUARE)
 
 
-def test_wrong_board_size_finds_nothing(views):
+def test_wrong_board_size_finds_nothing(views: list[np.ndarray]) -> None:
     with pytest.raises(CalibrationError, match="found in 0"):
         calibrate_from_images(views[:3], board=(7, 7), square_size=SQUARE)
 
 
-def test_bad_inputs(views, tmp_path):
+def test_bad_inputs(views: list[np.ndarray], tmp_path: Path) -> None:
     with pytest.raises(CalibrationError, match="no calibration images"):
         calibrate_from_images([], board=BOARD)
     with pytest.raises(CalibrationError, match="not found"):

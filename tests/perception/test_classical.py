@@ -8,6 +8,7 @@ import pytest
 
 from lapwrench.perception import (
     ClassicalDetector,
+    Detection,
     DetectorConfig,
     FrameError,
     TrackingPoint,
@@ -16,6 +17,7 @@ from lapwrench.perception import (
 )
 from lapwrench.perception.boxes import box_iou
 from lapwrench.perception.synthetic import (
+    DrawnInstrument,
     draw_instrument,
     draw_instrument_scene,
     draw_speckles,
@@ -23,7 +25,7 @@ from lapwrench.perception.synthetic import (
 )
 
 
-def match(dets, truth, iou=0.5):
+def match(dets: list[Detection], truth: list[DrawnInstrument], iou: float = 0.5) -> tuple[int, int, int, list[float]]:
     """(true positives, false positives, false negatives, tip errors in px) by greedy IoU matching."""
     used: set[int] = set()
     tips = []
@@ -38,7 +40,7 @@ def match(dets, truth, iou=0.5):
     return tp, len(dets) - tp, len(truth) - tp, tips
 
 
-def test_finds_drawn_instruments_and_their_tips():
+def test_finds_drawn_instruments_and_their_tips() -> None:
     det = ClassicalDetector()
     tp = fp = fn = 0
     tips: list[float] = []
@@ -55,7 +57,7 @@ def test_finds_drawn_instruments_and_their_tips():
     assert np.percentile(tips, 90) < 10.0
 
 
-def test_single_instrument_exact():
+def test_single_instrument_exact() -> None:
     rng = np.random.default_rng(5)
     img = tissue_background((640, 480), rng)
     g = draw_instrument(img, (-20, 100), (330, 250), rng, width=16)
@@ -67,7 +69,7 @@ def test_single_instrument_exact():
     assert d.class_name == "instrument" and 0.0 < d.score <= 1.0
 
 
-def test_ignores_speckles_and_vessels():
+def test_ignores_speckles_and_vessels() -> None:
     det = ClassicalDetector()
     for seed in range(10):
         rng = np.random.default_rng(100 + seed)
@@ -76,7 +78,7 @@ def test_ignores_speckles_and_vessels():
         assert det.detect(img) == [], f"seed {seed}"
 
 
-def test_bright_speckle_on_its_own_is_not_a_jaw():
+def test_bright_speckle_on_its_own_is_not_a_jaw() -> None:
     rng = np.random.default_rng(9)
     img = tissue_background((640, 480), rng)
     for x in range(60, 600, 40):  # a row of large specular highlights
@@ -84,7 +86,7 @@ def test_bright_speckle_on_its_own_is_not_a_jaw():
     assert ClassicalDetector().detect(img) == []
 
 
-def test_crossing_instruments_are_split():
+def test_crossing_instruments_are_split() -> None:
     rng = np.random.default_rng(2)
     img = tissue_background((640, 480), rng)
     g1 = draw_instrument(img, (-20, 60), (420, 330), rng, width=16)
@@ -94,7 +96,7 @@ def test_crossing_instruments_are_split():
     assert max(tips) < 6.0
 
 
-def test_bgr_input_and_class_filter():
+def test_bgr_input_and_class_filter() -> None:
     img, _ = draw_instrument_scene(n_instruments=1, seed=3)
     bgr = np.ascontiguousarray(img[..., ::-1])
     assert len(ClassicalDetector(DetectorConfig(color_order="bgr")).detect(bgr)) == 1
@@ -108,6 +110,6 @@ def test_bgr_input_and_class_filter():
      np.zeros((480, 320, 3), np.uint8)],
     ids=["empty", "gray", "float", "wrong-size"],
 )
-def test_bad_frames(image):
+def test_bad_frames(image: np.ndarray) -> None:
     with pytest.raises(FrameError):
         ClassicalDetector().detect(image)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+from collections.abc import Callable
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -41,13 +43,13 @@ def render_views() -> list[np.ndarray]:
     return views
 
 
-def parse(add, argv):
+def parse(add: Callable[[argparse.ArgumentParser], None], argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser()
     add(p)
     return p.parse_args(argv)
 
 
-def test_calibrate_writes_config_loadable_intrinsics(tmp_path, capsys):
+def test_calibrate_writes_config_loadable_intrinsics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     for i, img in enumerate(render_views()):
         cv2.imwrite(str(tmp_path / f"view_{i:02d}.png"), img)
     out = tmp_path / "cal" / "intrinsics.yaml"
@@ -65,7 +67,7 @@ def test_calibrate_writes_config_loadable_intrinsics(tmp_path, capsys):
     assert data["calibration"]["rms_reprojection_error_px"] < 0.5
 
 
-def test_calibrate_bad_inputs_give_clear_errors(tmp_path, capsys):
+def test_calibrate_bad_inputs_give_clear_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = parse(add_calibrate_arguments, [str(tmp_path / "nothing_*.png"), "--out", str(tmp_path / "i.yaml")])
     assert calibrate_main(args) == 2
     assert "image file not found" in capsys.readouterr().err
@@ -78,7 +80,7 @@ def test_calibrate_bad_inputs_give_clear_errors(tmp_path, capsys):
         parse(add_calibrate_arguments, ["x.png", "--board", "nine"])
 
 
-def test_dataset_main_tiny(tmp_path, capsys):
+def test_dataset_main_tiny(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("mujoco")
     make_renderable_world().close()  # skips (naming why) only when headless rendering is unavailable
     args = parse(add_dataset_arguments, ["--out", str(tmp_path), "--train", "1", "--val", "0", "--test", "1",
@@ -94,7 +96,7 @@ def test_dataset_main_tiny(tmp_path, capsys):
     assert dataset_main(bad) == 2
 
 
-def test_train_main_without_torch_or_data_is_a_clear_error(tmp_path, capsys):
+def test_train_main_without_torch_or_data_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = parse(add_train_arguments, ["--data", str(tmp_path / "missing.yaml")])
     assert train_main(args) == 2
     err = capsys.readouterr().err
@@ -104,13 +106,15 @@ def test_train_main_without_torch_or_data_is_a_clear_error(tmp_path, capsys):
         assert "not found" in err
 
 
-def test_module_main_dispatches(capsys):
+def test_module_main_dispatches(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "calibrate" in capsys.readouterr().out
 
 
-def test_output_paths_and_numbers_are_checked_before_any_work(tmp_path, capsys):
+def test_output_paths_and_numbers_are_checked_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Issue 11 item 10: an output under a plain file (unwritable even as root), a folder given for a file
     and nonsense numbers end in argparse's one error line (exit 2), not a traceback after the work."""
     blocker = tmp_path / "file"

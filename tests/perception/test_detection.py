@@ -28,11 +28,11 @@ SIZE = (640, 480)
         (TrackingPointRule("keypoint"), (150.0, 140.0)),  # no keypoint: centre
     ],
 )
-def test_tracking_point_rules(rule, expected):
+def test_tracking_point_rules(rule: TrackingPointRule, expected: tuple[float, float]) -> None:
     assert rule.point(BOX, SIZE) == pytest.approx(expected)
 
 
-def test_keypoint_rule_and_with_rule():
+def test_keypoint_rule_and_with_rule() -> None:
     rule = TrackingPointRule(TrackingPoint.KEYPOINT)
     assert rule.point(BOX, SIZE, keypoint=(190.0, 175.0)) == (190.0, 175.0)
     d = Detection(box=BOX, score=0.9, class_id=0, point=(150.0, 140.0), keypoint=(190.0, 175.0))
@@ -40,7 +40,7 @@ def test_keypoint_rule_and_with_rule():
     assert (d.u, d.v, d.width, d.height) == (150.0, 140.0, 100.0, 80.0)
 
 
-def test_config_validation():
+def test_config_validation() -> None:
     with pytest.raises(ValueError, match="score_threshold"):
         DetectorConfig(score_threshold=1.5)
     with pytest.raises(ValueError, match="iou_threshold"):

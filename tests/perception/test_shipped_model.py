@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import make_renderable_world
@@ -18,7 +20,7 @@ from lapwrench.perception import (
 )
 from lapwrench.perception.dataset import DatasetConfig
 from lapwrench.perception.evaluate import evaluate_predictions
-from lapwrench.sim.dataset import FrameLabeller
+from lapwrench.sim.dataset import FrameLabeller, LabelledFrame
 
 MODEL = SHIPPED_MODEL
 
@@ -30,7 +32,7 @@ def detector() -> OnnxYoloDetector:
 
 
 @pytest.fixture(scope="module")
-def frames():
+def frames() -> list[LabelledFrame]:
     """Twelve fresh frames (seeds unlike any dataset split's), both instruments placed in view."""
     world = make_renderable_world()
     lab = FrameLabeller(world, DatasetConfig(instrument_prob=1.0, border_prob=0.15))
@@ -42,12 +44,12 @@ def frames():
     return out
 
 
-def test_model_loads_with_its_class_names(detector):
+def test_model_loads_with_its_class_names(detector: OnnxYoloDetector) -> None:
     assert detector.input_shape_for((480, 640)) == (256, 320)
     assert detector.class_names in ({0: "instrument"}, ["instrument"])
 
 
-def test_detects_instruments_in_fresh_sim_frames(detector, frames):
+def test_detects_instruments_in_fresh_sim_frames(detector: OnnxYoloDetector, frames: list[LabelledFrame]) -> None:
     preds = [detector.detect(f.image) for f in frames]
     truths = [(f.boxes, f.classes) for f in frames]
     r = evaluate_predictions(preds, truths, score_threshold=0.25)
@@ -61,12 +63,12 @@ def test_detects_instruments_in_fresh_sim_frames(detector, frames):
             assert 0 <= d.u <= 640 and 0 <= d.v <= 480 and d.class_name == "instrument"
 
 
-def test_make_detector_builds_the_shipped_model():
+def test_make_detector_builds_the_shipped_model() -> None:
     det = make_detector(MODEL)
     assert isinstance(det, OnnxYoloDetector)
 
 
-def test_shipped_detector_runs_with_the_shipped_options(detector):
+def test_shipped_detector_runs_with_the_shipped_options(detector: OnnxYoloDetector) -> None:
     assert detector.model_path == MODEL
     assert detector.test_time_flip == SHIPPED_MODEL_OPTIONS.get("test_time_flip", False)
 
@@ -81,12 +83,12 @@ def test_shipped_detector_runs_with_the_shipped_options(detector):
         ("frame.png", "numpy array"),
     ],
 )
-def test_bad_frames_raise_clear_errors(detector, image, match):
+def test_bad_frames_raise_clear_errors(detector: OnnxYoloDetector, image: np.ndarray | str, match: str) -> None:
     with pytest.raises(FrameError, match=match):
         detector.detect(image)
 
 
-def test_corrupt_copy_of_the_model_raises(tmp_path):
+def test_corrupt_copy_of_the_model_raises(tmp_path: Path) -> None:
     bad = tmp_path / "instruments.onnx"
     bad.write_bytes(MODEL.read_bytes()[:5000])
     with pytest.raises(ModelError):

@@ -22,7 +22,7 @@ def run(code: str) -> str:
     return out.stdout.strip().splitlines()[-1]
 
 
-def test_reference_nms_matches_a_brute_force_greedy_nms():
+def test_reference_nms_matches_a_brute_force_greedy_nms() -> None:
     code = """
 import torch
 from lapwrench.perception.torch_compat import nms_reference
@@ -45,7 +45,7 @@ print(keep == expect)
     assert run(code) == "True"
 
 
-def test_torchvision_imports_and_its_nms_works():
+def test_torchvision_imports_and_its_nms_works() -> None:
     if importlib.util.find_spec("torchvision") is None:
         pytest.skip("torchvision not installed")
     code = """

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import pytest
 
 from lapwrench.perception import (
@@ -33,13 +35,15 @@ from lapwrench.perception import (
         ([("output0", (1, 300, 6))], {"end2end": True}, OutputLayout.E2E_XYXY_SCORE_CLS, None),
     ],
 )
-def test_infer_layout(outputs, kwargs, layout, nc):
+def test_infer_layout(
+    outputs: list[tuple[str, tuple[int, ...]]], kwargs: dict[str, Any], layout: OutputLayout, nc: int | None
+) -> None:
     info = infer_layout(outputs, **kwargs)
     assert info.layout is layout
     assert info.num_classes == nc
 
 
-def test_infer_layout_split_output_order():
+def test_infer_layout_split_output_order() -> None:
     outs = [("det_classes", (1, 50)), ("det_scores", (1, 50)), ("det_boxes", (1, 50, 4)), ("num_dets", (1, 1))]
     assert infer_layout(outs).outputs == (3, 2, 1, 0)
 
@@ -54,6 +58,6 @@ def test_infer_layout_split_output_order():
         ([("o", (1, 100, 7))], {"end2end": True}),
     ],
 )
-def test_infer_layout_rejects(outputs, kwargs):
+def test_infer_layout_rejects(outputs: list[tuple[str, tuple[int, ...]]], kwargs: dict[str, Any]) -> None:
     with pytest.raises(ValueError):
         infer_layout(outputs, **kwargs)

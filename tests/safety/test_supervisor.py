@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
 from lapwrench.config import load
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
-from lapwrench.robot.limits import limit_usage
+from lapwrench.robot.limits import JointLimits, limit_usage
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig, SupervisorState
 from lapwrench.virtual import DEFAULT_Q0
@@ -16,11 +18,11 @@ DT = 1e-3
 
 
 @pytest.fixture(scope="module")
-def limits():
+def limits() -> JointLimits:
     return RobotModel("panda").limits
 
 
-def started(limits, **kw) -> SafetySupervisor:
+def started(limits: JointLimits, **kw: Any) -> SafetySupervisor:
     s = SafetySupervisor(limits, DT, SupervisorConfig(**kw))
     s.start(DEFAULT_Q0)
     return s
@@ -36,7 +38,7 @@ def run_to_rest(s: SafetySupervisor, q: np.ndarray, cmds: list[np.ndarray], limi
         cmds.append(s.filter(0.0, q))
 
 
-def test_valid_commands_pass_unchanged(limits) -> None:
+def test_valid_commands_pass_unchanged(limits: JointLimits) -> None:
     s = started(limits)
     q = DEFAULT_Q0.copy()
     for k in range(50):
@@ -46,7 +48,7 @@ def test_valid_commands_pass_unchanged(limits) -> None:
     assert s.state is SupervisorState.RUNNING and not s.alarm
 
 
-def test_every_form_of_a_command_is_checked_and_remembered_alike(limits) -> None:
+def test_every_form_of_a_command_is_checked_and_remembered_alike(limits: JointLimits) -> None:
     """float64 arrays take a compiled path of their own: lists and strided views give the same commands
     and the same history, and the command handed back is the caller's own copy."""
     fast, slow, strided = started(limits), started(limits), started(limits)
@@ -75,7 +77,7 @@ def test_every_form_of_a_command_is_checked_and_remembered_alike(limits) -> None
         (DEFAULT_Q0 + np.r_[1e-5, 0, 0, 0, 0, 0, 0], "command_jerk"),  # 10000 rad/s^3 > 7500
     ],
 )
-def test_bad_command_is_replaced_by_a_stop(limits, bad, kind) -> None:
+def test_bad_command_is_replaced_by_a_stop(limits: JointLimits, bad: np.ndarray | str, kind: str) -> None:
     s = started(limits)
     out = s.filter(0.1, bad)
     assert np.all(np.isfinite(out)) and np.allclose(out, DEFAULT_Q0)
@@ -84,14 +86,14 @@ def test_bad_command_is_replaced_by_a_stop(limits, bad, kind) -> None:
     assert s.replaced_commands == 1
 
 
-def test_jerk_exactly_at_the_limit_passes(limits) -> None:
+def test_jerk_exactly_at_the_limit_passes(limits: JointLimits) -> None:
     s = started(limits)
     step = limits.jerk * DT**3  # q = j dt^3 from rest: v = j dt^2, a = j dt, jerk = j exactly
     assert s.check_command(DEFAULT_Q0 + step * 0.999) is None
     assert s.check_command(DEFAULT_Q0 + step * 1.01)[0] == "command_jerk"
 
 
-def test_rcm_error_over_bound_holds_with_alarm(limits) -> None:
+def test_rcm_error_over_bound_holds_with_alarm(limits: JointLimits) -> None:
     s = started(limits, max_rcm_error=0.005)
     out = s.filter(0.0, DEFAULT_Q0, rcm_error=0.004)
     assert not s.alarm
@@ -104,7 +106,7 @@ def test_rcm_error_over_bound_holds_with_alarm(limits) -> None:
     assert s2.alarm
 
 
-def test_measured_joint_near_limit(limits) -> None:
+def test_measured_joint_near_limit(limits: JointLimits) -> None:
     s = started(limits, joint_warn_margin=0.05, joint_stop_margin=0.01)
     near = DEFAULT_Q0.copy()
     near[0] = limits.position_upper[0] - 0.03
@@ -115,7 +117,7 @@ def test_measured_joint_near_limit(limits) -> None:
     assert s.alarm and "joint_limit" in s.alarm_reason
 
 
-def test_deadline_misses_counted_and_consecutive_ones_stop(limits) -> None:
+def test_deadline_misses_counted_and_consecutive_ones_stop(limits: JointLimits) -> None:
     s = started(limits, cycle_budget=0.0005, max_consecutive_misses=3)
     s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
     s.filter(0.0, DEFAULT_Q0, compute_time=0.001)
@@ -152,7 +154,7 @@ def test_clean_stop_reaches_rest_inside_the_limits(kind: str) -> None:
         assert np.allclose(v, 0) and np.allclose(a, 0)
 
 
-def test_filter_before_start_is_an_error(limits) -> None:
+def test_filter_before_start_is_an_error(limits: JointLimits) -> None:
     with pytest.raises(RuntimeError):
         SafetySupervisor(limits, DT).filter(0.0, DEFAULT_Q0)
 
@@ -165,7 +167,9 @@ def test_config_validation() -> None:
 
 
 # -- measured-state watches (issue 9): each one holds with an alarm naming the quantity and value --
-def moving(limits, seed: int = 5, ticks: int = 300) -> tuple[SafetySupervisor, np.ndarray, list[np.ndarray]]:
+def moving(
+    limits: JointLimits, seed: int = 5, ticks: int = 300
+) -> tuple[SafetySupervisor, np.ndarray, list[np.ndarray]]:
     """A supervisor (from the shipped config) passing a shaped full-speed reference: the arm is moving."""
     s = SafetySupervisor(limits, DT, SupervisorConfig.from_config(load(), max_consecutive_misses=0))
     s.start(DEFAULT_Q0)
@@ -180,7 +184,9 @@ def moving(limits, seed: int = 5, ticks: int = 300) -> tuple[SafetySupervisor, n
     return s, st.q, cmds
 
 
-def assert_stopped_at_rest_inside_limits(s: SafetySupervisor, q: np.ndarray, cmds: list[np.ndarray], limits) -> None:
+def assert_stopped_at_rest_inside_limits(
+    s: SafetySupervisor, q: np.ndarray, cmds: list[np.ndarray], limits: JointLimits
+) -> None:
     run_to_rest(s, q + 0.3, cmds)  # commands after the hold are ignored, however far they jump
     usage = limit_usage(np.array(cmds), DT, limits, DEFAULT_Q0)
     assert usage["position_excess"] == 0 and max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1, usage
@@ -206,7 +212,7 @@ HOLDS = {
 
 
 @pytest.mark.parametrize("case", sorted(HOLDS))
-def test_measured_state_holds_with_an_alarm_naming_it(limits, case: str) -> None:
+def test_measured_state_holds_with_an_alarm_naming_it(limits: JointLimits, case: str) -> None:
     measured, reason = HOLDS[case]
     s, q, cmds = moving(limits)
     kw = {"rcm_error": 0.001, "depth": 0.058, "residual": np.zeros(3), **measured}
@@ -225,7 +231,7 @@ def test_measured_state_holds_with_an_alarm_naming_it(limits, case: str) -> None
     assert_stopped_at_rest_inside_limits(s, q, cmds, limits)
 
 
-def test_a_residual_force_transient_shorter_than_its_time_does_not_hold(limits) -> None:
+def test_a_residual_force_transient_shorter_than_its_time_does_not_hold(limits: JointLimits) -> None:
     """A hand letting go of 30 N at once: |ΔF| ~26 N for ~25 ms while the force estimate catches up."""
     s = started(limits)
     for k in range(40):
@@ -245,7 +251,7 @@ def test_a_residual_force_transient_shorter_than_its_time_does_not_hold(limits) 
         {"rcm_error": None, "depth": None, "residual": None},
     ],
 )
-def test_measured_state_inside_the_bounds_passes(limits, measured: dict) -> None:
+def test_measured_state_inside_the_bounds_passes(limits: JointLimits, measured: dict) -> None:
     s = started(limits)
     assert np.array_equal(s.filter(0.0, DEFAULT_Q0, q_measured=DEFAULT_Q0, **measured), DEFAULT_Q0)
     assert not s.alarm
@@ -265,7 +271,7 @@ def test_measured_bounds_come_from_the_yaml_config() -> None:
         SupervisorConfig(max_residual_force=float("nan"))
 
 
-def test_a_braking_controller_is_followed_to_rest_then_held_with_an_alarm(limits) -> None:
+def test_a_braking_controller_is_followed_to_rest_then_held_with_an_alarm(limits: JointLimits) -> None:
     """TickResult.rcm_infeasible: the controller's own braking commands pass (they keep the RCM as far
     as the limits allow); once they are at rest the arm holds with an alarm."""
     s, q, cmds = moving(limits)

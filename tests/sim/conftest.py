@@ -6,6 +6,8 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from collections.abc import Iterator
+
 import pytest
 
 from lapwrench.sim.scene.build import Scene, build_scene
@@ -20,7 +22,7 @@ def panda_scene() -> Scene:
 
 
 @pytest.fixture
-def world(panda_scene: Scene) -> SimWorld:
+def world(panda_scene: Scene) -> Iterator[SimWorld]:
     """A fresh SimWorld on the shared Panda scene (its own MjData)."""
     w = SimWorld(panda_scene)
     yield w

@@ -3,34 +3,37 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from helpers import make_renderable_world
 
-from lapwrench.perception.dataset import DatasetConfig, dataset_matches
+from lapwrench.perception.dataset import DatasetConfig, DatasetSummary, dataset_matches
 from lapwrench.perception.evaluate import read_yolo_split
 from lapwrench.sim.dataset import FrameLabeller, generate_dataset
+from lapwrench.sim.world import SimWorld
 
 W, H = 640, 480
 
 
 @pytest.fixture(scope="module")
-def world():
+def world() -> Iterator[SimWorld]:
     w = make_renderable_world()
     yield w
     w.close()
 
 
 @pytest.fixture(scope="module")
-def tiny(world, tmp_path_factory):
+def tiny(world: SimWorld, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, DatasetConfig, DatasetSummary]:
     root = tmp_path_factory.mktemp("ds")
     cfg = DatasetConfig(n_train=4, n_val=2, n_test=3, seed=3)
     return root, cfg, generate_dataset(root, cfg, world=world)
 
 
-def test_layout_and_data_yaml(tiny):
+def test_layout_and_data_yaml(tiny: tuple[Path, DatasetConfig, DatasetSummary]) -> None:
     root, cfg, summary = tiny
     assert summary.images == {"train": 4, "val": 2, "test": 3}
     data = yaml.safe_load((root / "data.yaml").read_text())
@@ -47,7 +50,7 @@ def test_layout_and_data_yaml(tiny):
     assert not dataset_matches(root, DatasetConfig(n_train=4, n_val=2, n_test=3, seed=4), "test")
 
 
-def test_labels_are_valid_and_inside_the_image(tiny):
+def test_labels_are_valid_and_inside_the_image(tiny: tuple[Path, DatasetConfig, DatasetSummary]) -> None:
     root, _cfg, summary = tiny
     n_boxes = 0
     for split in ("train", "val", "test"):
@@ -66,7 +69,7 @@ def test_labels_are_valid_and_inside_the_image(tiny):
     assert len(truths) == 4 and all(t.boxes.shape[1] == 4 for t in truths)
 
 
-def test_boxes_cover_the_projected_tips(tiny):
+def test_boxes_cover_the_projected_tips(tiny: tuple[Path, DatasetConfig, DatasetSummary]) -> None:
     """A labelled instrument's jaw box holds (or nearly holds) its projected jaw tip."""
     root, _cfg, _ = tiny
     checked = 0
@@ -83,7 +86,9 @@ def test_boxes_cover_the_projected_tips(tiny):
     assert checked > 0
 
 
-def test_deterministic_and_splits_regenerate_alone(tiny, world, tmp_path):
+def test_deterministic_and_splits_regenerate_alone(
+    tiny: tuple[Path, DatasetConfig, DatasetSummary], world: SimWorld, tmp_path: Path
+) -> None:
     root, cfg, _ = tiny
     generate_dataset(tmp_path, cfg, splits=["test"], world=world)
     for name in sorted(p.name for p in (root / "labels" / "test").glob("*.txt")):
@@ -91,7 +96,7 @@ def test_deterministic_and_splits_regenerate_alone(tiny, world, tmp_path):
     assert not (tmp_path / "images" / "train").exists()
 
 
-def test_labeller_handles_occlusion_by_segmentation(world):
+def test_labeller_handles_occlusion_by_segmentation(world: SimWorld) -> None:
     lab = FrameLabeller(world, DatasetConfig(instrument_prob=1.0, border_prob=0.0))
     try:
         frame = lab.render(np.random.default_rng(11), degrade=False)
@@ -111,6 +116,6 @@ def test_labeller_handles_occlusion_by_segmentation(world):
         world.reset()
 
 
-def test_unknown_split(tmp_path):
+def test_unknown_split(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="unknown split"):
         generate_dataset(tmp_path, DatasetConfig(n_train=1, n_val=0, n_test=0), splits=["bogus"])

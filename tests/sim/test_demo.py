@@ -10,10 +10,13 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NoReturn
 
 import pytest
 
+from lapwrench.config import Config
 from lapwrench.sim import demo as demo_mod
+from lapwrench.sim.results import ScenarioOptions
 from lapwrench.sim.world import SimulationUnstableError
 
 pytestmark = pytest.mark.slow  # full scenarios in the MuJoCo world
@@ -80,7 +83,7 @@ def test_malformed_config_and_unwritable_folder(tmp_path: Path) -> None:
 
 
 def test_unstable_simulation_stops_without_a_valid_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    def explode(cfg, opts):
+    def explode(cfg: Config, opts: ScenarioOptions) -> NoReturn:
         raise SimulationUnstableError(1.234, "shaft-incision contact force |F| (N)", "912.0")
 
     monkeypatch.setitem(demo_mod.SCENARIOS, "rcm-disturbance", explode)

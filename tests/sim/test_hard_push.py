@@ -15,10 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lapwrench.config import load
+from lapwrench.config import Config, load
 from lapwrench.sim import demo as demo_mod
 from lapwrench.sim import hard_push as hp
+from lapwrench.sim.results import ScenarioResult
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, ScenarioOptions
+from lapwrench.sim.world import SimWorld
 
 pytestmark = pytest.mark.slow  # the hard-push runs in the MuJoCo world
 
@@ -49,7 +51,7 @@ def test_the_full_set_covers_the_issue() -> None:
 
 
 @pytest.mark.parametrize("case", [c for c in hp.default_cases() if c.kind != "speed" and c.magnitude != 20.0])
-def test_pushes_keep_their_direction_relative_to_the_shaft(world, case: hp.PushCase) -> None:
+def test_pushes_keep_their_direction_relative_to_the_shaft(world: SimWorld, case: hp.PushCase) -> None:
     hand = hp.make_hand(case, world, push_s=1.0)
     assert hand.apply(world, 0.5, 1e-3) == case.grip_force
     f, tau = world.hand_force(), world.hand_torque()
@@ -68,7 +70,7 @@ def test_pushes_keep_their_direction_relative_to_the_shaft(world, case: hp.PushC
     assert hand.apply(world, 1.0, 1e-3) == 0.0 and _push_size(world) == 0.0  # lets go
 
 
-def _push_size(world) -> float:
+def _push_size(world: SimWorld) -> float:
     """|f| + |τ| of the hand (N, N m): the cases push with one of them only."""
     return float(np.linalg.norm(world.hand_force()) + np.linalg.norm(world.hand_torque()))
 
@@ -77,7 +79,7 @@ def test_shortened_hard_push_in_the_demo_report(tmp_path: Path, monkeypatch: pyt
     """30 N lateral, 30 N axial, the 1 rad/s hand and the roll torque, through ``lapwrench demo``."""
     results: dict = {}
 
-    def reduced(cfg, opts: ScenarioOptions):
+    def reduced(cfg: Config, opts: ScenarioOptions) -> ScenarioResult:
         results["res"] = hp.hard_push(cfg, opts, cases=hp.ci_cases())
         return results["res"]
 

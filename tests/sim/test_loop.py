@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lapwrench.config import load
+from lapwrench.motion.reference_shaper import ReferenceState
 from lapwrench.rcm.geometry import rcm_error
 from lapwrench.robot.limits import limit_usage
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
@@ -93,7 +94,7 @@ def test_a_controller_that_cannot_keep_the_rcm_brakes_to_rest_then_the_superviso
     push = np.cross(d, [0.0, 0.0, 1.0])
     push = 20.0 * push / np.linalg.norm(push)
 
-    def frozen(state, lo, hi):  # type: ignore[no-untyped-def]
+    def frozen(state: ReferenceState, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = lo.copy(), hi.copy()
         if loop.t > 0.2:  # from 0.2 s on, only joint 1 may change its acceleration toward zero
             lo[1:] = hi[1:] = np.clip(0.0, lo[1:], hi[1:])

@@ -3,6 +3,7 @@ scenario plot, every cue plotted with no code per cue, the snapshot strip."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -28,7 +29,9 @@ def png_size(path: Path) -> tuple[int, int]:
         (plots.plot_hard_push, hard_push, "hard_push.png"),  # one run stopped before its first tick
     ],
 )
-def test_each_scenario_plot_writes_its_png(tmp_path: Path, plot, result, name: str) -> None:
+def test_each_scenario_plot_writes_its_png(
+    tmp_path: Path, plot: Callable[[ScenarioResult, Path], list[str]], result: Callable[[], ScenarioResult], name: str
+) -> None:
     assert plot(result(), tmp_path) == [name]
     h, w = png_size(tmp_path / name)
     assert h > 300 and w > 1000

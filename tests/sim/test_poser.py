@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.sim.poser import ScopePoser
+from lapwrench.sim.world import SimWorld
 
 
-def test_scope_poses_keep_the_shaft_through_the_incision(world):
+def test_scope_poses_keep_the_shaft_through_the_incision(world: SimWorld) -> None:
     poser = ScopePoser(world)
     q = poser.configuration(0.15, -0.1, 0.5, -0.02)
     assert q is not None

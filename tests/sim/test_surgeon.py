@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from lapwrench.sim.surgeon import SpeedDrivenHand
+from lapwrench.sim.world import SimWorld
 
 
-def test_speed_driven_hand_is_capped_and_rate_limited(world) -> None:
+def test_speed_driven_hand_is_capped_and_rate_limited(world: SimWorld) -> None:
     _, R_E = world.frame_pose("lap_E")
     hand = SpeedDrivenHand(R_E[:, 0], speed=1.0, grip_force=30.0)
     forces = []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.world import JointServoGains, SimWorld
 
 
@@ -17,7 +18,7 @@ def _plain_contact_force(world: SimWorld) -> np.ndarray:
     return np.zeros(3) if rows.size < 3 else -d.efc_force[rows[:3]]
 
 
-def test_worlds_sharing_a_scene_keep_their_own_gains(panda_scene) -> None:
+def test_worlds_sharing_a_scene_keep_their_own_gains(panda_scene: Scene) -> None:
     soft = JointServoGains(stiffness=(300.0,) * 7, damping=(10.0,) * 7)
     a = SimWorld(panda_scene, gains=soft)
     b = SimWorld(panda_scene)
@@ -56,7 +57,7 @@ def test_cached_ids_and_views_read_what_fresh_lookups_read(world: SimWorld) -> N
     np.testing.assert_array_equal(world.contact_force(), np.zeros(3))
 
 
-def test_a_new_world_starts_as_reset_leaves_it(panda_scene) -> None:
+def test_a_new_world_starts_as_reset_leaves_it(panda_scene: Scene) -> None:
     """The kernels' warm-up tick in the constructor leaves no trace."""
     w = SimWorld(panda_scene)
     assert w.time == 0.0

@@ -5,10 +5,11 @@ from __future__ import annotations
 import pytest
 
 from lapwrench.robot.description import ARM_SPECS
+from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.world import JointServoGains, SimWorld
 
 
-def test_the_servo_gains_are_the_robots_and_one_per_joint(panda_scene) -> None:
+def test_the_servo_gains_are_the_robots_and_one_per_joint(panda_scene: Scene) -> None:
     spec = ARM_SPECS["panda"]
     w = SimWorld(panda_scene)
     assert w.n_joints == spec.n_joints and w.gains == JointServoGains.for_robot("panda")

@@ -10,6 +10,7 @@ import sys
 import mujoco
 import numpy as np
 
+from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.world import CONTROL_DT, SimWorld
 
 
@@ -88,7 +89,7 @@ print(json.dumps(out))
 """
 
 
-def test_compiled_step_matches_the_plain_step_bit_for_bit(panda_scene) -> None:
+def test_compiled_step_matches_the_plain_step_bit_for_bit(panda_scene: Scene) -> None:
     """The kernels, the cached views and the reused first-substep forward change no bit of the
     trajectory: state, tick-mean torque, sensors, contact force and readings are identical."""
     fast, plain = SimWorld(panda_scene), SimWorld(panda_scene)

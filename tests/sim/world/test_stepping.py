@@ -6,6 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from lapwrench.sim.scene.build import Scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.world import SimulationUnstableError, SimWorld
 
@@ -81,7 +82,7 @@ def test_instability_detector_fires_on_mujoco_divergence(world: SimWorld) -> Non
         world.step(world.scene.q0)
 
 
-def test_instability_detector_fires_on_contact_blowup(panda_scene) -> None:
+def test_instability_detector_fires_on_contact_blowup(panda_scene: Scene) -> None:
     w = SimWorld(panda_scene, max_contact_force=3.0)
     w.set_housing_load(np.array([0.0, 40.0, 0.0]))
     with pytest.raises(SimulationUnstableError, match="contact force") as info:
@@ -116,11 +117,13 @@ def test_scope_beyond_the_trocar_is_reported(world: SimWorld) -> None:
 # The compiled tick against the straightforward one
 
 
-def test_first_substep_reuses_the_closing_forward_only_when_the_state_is_unchanged(world, monkeypatch) -> None:
+def test_first_substep_reuses_the_closing_forward_only_when_the_state_is_unchanged(
+    world: SimWorld, monkeypatch: pytest.MonkeyPatch
+) -> None:
     calls = {"mj_step2": 0}
     real = mujoco.mj_step2
 
-    def counting(m, d):
+    def counting(m: mujoco.MjModel, d: mujoco.MjData) -> None:
         calls["mj_step2"] += 1
         real(m, d)
 
@@ -195,7 +198,7 @@ def test_the_readings_after_a_tick_are_those_of_its_end_state(world: SimWorld) -
     assert np.array_equal(data.efc_force, world.data.efc_force)
 
 
-def test_skipping_the_collision_pass_changes_nothing(panda_scene) -> None:
+def test_skipping_the_collision_pass_changes_nothing(panda_scene: Scene) -> None:
     """The scene's geoms never touch, so the world turns contacts off: the same trajectory as with them on."""
     skip, full = SimWorld(panda_scene), SimWorld(panda_scene)
     contact = int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
