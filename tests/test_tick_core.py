@@ -24,7 +24,7 @@ from lapwrench.robot.model import Kinematics, ScopeAxis, assemble_kinematics, in
 from lapwrench.virtual import home_pose
 from lapwrench.wrenches.ft_zero import FtTare, conditioned_ft
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
-from lapwrench.wrenches.rcm import rcm_force
+from lapwrench.wrenches.rcm import rcm_feedforward, rcm_force
 from lapwrench.wrenches.tracking import virtual_force
 
 SEEDS = range(6)
@@ -161,7 +161,10 @@ def expected_motion(ctrl: Controller, f: Front, r: Readings, stopping: bool, ext
     """motion_stage rebuilt from the equation functions (eq 2-14, 37-40) and the virtual model's."""
     p, kin, geo = ctrl.params, f.kin, f.geo
     n, Minv = kin.q.shape[0], inverse_inertia(kin.M)
+    J_pinv = al.weighted_pseudo_inverse(geo.J_R, Minv, *([kin.d_z] if p.lateral else []))
     F_r = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
+    if p.rcm_feedforward:
+        F_r = F_r + rcm_feedforward(kin, Minv, geo.J_R, J_pinv, rg.rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
     delta, contacts = grip_gain(r.tactile, p.k_H, p.k_min, p.contact_threshold)
     W_h = (np.r_[interaction_wrench(r.ft_force, r.ft_torque, kin.R_H, delta)] if p.cue_interaction and delta != 0.0
            else np.zeros(6))
@@ -170,7 +173,6 @@ def expected_motion(ctrl: Controller, f: Front, r: Readings, stopping: bool, ext
     W_f = -D @ (geo.J_G @ kin.dq)
     W_x, P_x, D_extra, task_F = EXTRA if extra else NO_EXTRA
     W_n = al.nullspace_wrench(np.vstack([W_h, W_c, W_f, W_x]), np.vstack([kin.p_H, kin.p_C, geo.p_G, P_x]), geo.p_G)
-    J_pinv = al.weighted_pseudo_inverse(geo.J_R, Minv, *([kin.d_z] if p.lateral else []))
     N_r = al.nullspace_projector(geo.J_R, J_pinv)
     tau_n = np.zeros(n) if stopping else al.nullspace_torque(geo.J_G, W_n)
     tau = al.task_priority_torque(geo.J_R, F_r + task_F, N_r, tau_n)
@@ -195,6 +197,7 @@ def expected_motion(ctrl: Controller, f: Front, r: Readings, stopping: bool, ext
                          ids=["running", "stopping", "python-cue"])
 def test_motion_stage_composes_the_equations(ctrl: Controller, stopping: bool, extra: bool) -> None:
     p = ctrl.params
+    assert p.rcm_feedforward  # the default: the RCM force includes the feed-forward (wrenches/rcm.py)
     assert p.cue_interaction and p.cue_tracking and p.cue_viscous  # the default configuration fuses the three
     wrenches_seen = np.zeros(4)
     for rng in map(np.random.default_rng, SEEDS):
@@ -204,8 +207,10 @@ def test_motion_stage_composes_the_equations(ctrl: Controller, stopping: bool, e
             close(getattr(o, key), value, key)
         assert not o.non_finite
         wrenches_seen += [np.abs(w).max() for w in (o.W_r, o.W_h, o.W_c, o.W_f)]
-        # eq (14) by hand: F_r = -Kp e - Kd ė
-        close(o.W_r[3:], -p.Kp * (f.geo.e_R + f.geo.e_R_offset) - p.Kd * f.geo.e_R_rate, "eq 14")
+        # eq (14) by hand, F_r = -Kp e - Kd ė, plus the feed-forward: a force across the shaft only
+        F_ff = o.W_r[3:] - (-p.Kp * (f.geo.e_R + f.geo.e_R_offset) - p.Kd * f.geo.e_R_rate)
+        close(F_ff @ f.kin.d_z, 0.0, "eq 14 + F_ff across the shaft")
+        assert np.abs(F_ff).max() > 1e-6  # the random joint speeds make velocity products
         # admitted iff a_d meets the joint box (and the envelope rows, checked like the stage)
         box_ok = bool(np.all(np.maximum(o.a_lo - o.a_d, o.a_d - o.a_hi) / p.a_max <= VIOLATION_TOL))
         y = o.env_W @ (f.kin.J_E @ o.a_d)

@@ -111,6 +111,9 @@ class RcmConfig:
     Kp: float = ranged("(0, 10000]", 300.0, "N/m: 10 N at 1 mm; stiffer rings through the arm's admittance")
     # below 10 the RCM error of a 5 kg arm (the UR5's lateral mass at p_R) decays slower than 2 m/K_d = 1 s
     Kd: float = ranged("[10, 2000]", 20.0, "N s/m; below, the RCM error decays slower than 1 s; above, the solve fails")
+    # cancel the velocity-product terms (J̇_R θ̇, Coriolis) of the RCM error's dynamics; eq (2) has none
+    # (false): near a singularity they pushed the RCM error to 5-8 mm (README, "RCM feed-forward")
+    feedforward: bool = True
 
 
 @dataclass(frozen=True)

@@ -59,6 +59,7 @@ from lapwrench.rcm.geometry import (
     lateral_rcm_jacobian,
     lateral_task,
     rcm_error,
+    rcm_error_drift,
     rcm_error_rate,
     rcm_jacobian,
 )
@@ -74,7 +75,7 @@ from lapwrench.spatial import Mat, Vec, all_finite, matvec
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.ft_zero import FtTare, conditioned_ft
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
-from lapwrench.wrenches.rcm import rcm_force
+from lapwrench.wrenches.rcm import rcm_feedforward, rcm_force
 from lapwrench.wrenches.tracking import virtual_force
 
 
@@ -177,8 +178,11 @@ def motion_stage(
     the null-space cues' wrenches (rows about ``extra_points``) and the sum of their damping
     matrices (eq 40's form, 6 x 6), and the task-space cues' summed force at p_R."""
     # 4. wrenches (eq 5-14, 40), each in {B} about its own point; the paper's cues the config switched on
+    J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
     W_r = np.zeros(6)
     W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
+    if p.rcm_feedforward:
+        W_r[3:] += rcm_feedforward(kin, Minv, geo.J_R, J_pinv, rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
     delta, contacts = 0.0, 0
     if has_tactile:
         delta, contacts = grip_gain(tactile, p.k_H, p.k_min, p.contact_threshold)
@@ -199,7 +203,6 @@ def motion_stage(
     P_all[0], P_all[1], P_all[2] = kin.p_H, kin.p_C, geo.p_G
     W_all[3:] = extra_W
     P_all[3:] = extra_points
-    J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
     N_r = nullspace_projector(geo.J_R, J_pinv)
     W_n = nullspace_wrench(W_all, P_all, geo.p_G)
     tau_n = np.zeros(kin.q.shape[0]) if stopping else nullspace_torque(geo.J_G, W_n)
@@ -352,7 +355,7 @@ def tick_front(
     ``p_measured``); ΔF (eq 19; zero unless the F/T and the robot's estimate are both valid) and
     :func:`geometry_stage`. Returns (kin, geo, F_re⊥, ΔF, has ΔF, the hand's force, its torque)."""
     kin = assemble_kinematics(terms.q, terms.dq, terms.M_upper, terms.nle, terms.gravity, terms.p_E, terms.R_E,
-                              terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J)
+                              terms.p_H, terms.R_H, terms.p_C, terms.R_C, terms.J, terms.a)
     force, torque = ft_force, ft_torque
     if has_ft:
         R_H = R_measured if has_measured else terms.R_H  # both Pinocchio's (column-major) rotations

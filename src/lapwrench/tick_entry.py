@@ -30,7 +30,7 @@ from lapwrench.wrenches.ft_zero import FtTare
 @kernel
 def front_size(n: int) -> int:
     """Floats in the buffer of :func:`front_views` for an ``n``-joint robot."""
-    return n * n + 19 * n + 69
+    return n * n + 19 * n + 75
 
 
 @kernel
@@ -51,9 +51,9 @@ def front_views(buf: Vec, n: int, s_star: float) -> tuple[Kinematics, TaskGeomet
     kin = Kinematics(
         q, dq, M, nle, gravity, buf[at:at + 3], buf[at + 3:at + 12].reshape((3, 3)), J_E, buf[at + 12:at + 15],
         buf[at + 15:at + 24].reshape((3, 3)), buf[at + 24:at + 27], buf[at + 27:at + 36].reshape((3, 3)),
-        buf[at + 36:at + 39], buf[at + 39:at + 48].reshape((3, 3)),
+        buf[at + 36:at + 39], buf[at + 39:at + 48].reshape((3, 3)), buf[at + 48:at + 54],
     )
-    at += 48
+    at += 54
     geo = TaskGeometry(
         buf[at:at + 3], buf[at + 3:at + 6], buf[at + 6:at + 9], buf[at + 9:at + 12], J_R, s_star,
         buf[at + 12:at + 15], buf[at + 15:at + 18], J_G, buf[at + 18:at + 21],
@@ -79,7 +79,7 @@ def front_into(
     kin, geo = front_views(buf, k.q.shape[0], g.s_star)
     kin.q[:], kin.dq[:], kin.M[:], kin.nle[:], kin.gravity[:] = k.q, k.dq, k.M, k.nle, k.gravity
     kin.p_E[:], kin.R_E[:], kin.J_E[:], kin.p_H[:], kin.R_H[:] = k.p_E, k.R_E, k.J_E, k.p_H, k.R_H
-    kin.p_C[:], kin.R_C[:], kin.d_z[:], kin.P[:] = k.p_C, k.R_C, k.d_z, k.P
+    kin.p_C[:], kin.R_C[:], kin.d_z[:], kin.P[:], kin.a_E[:] = k.p_C, k.R_C, k.d_z, k.P, k.a_E
     geo.p_R[:], geo.rcm_velocity[:], geo.e_R[:], geo.e_R_rate[:] = g.p_R, g.rcm_velocity, g.e_R, g.e_R_rate
     geo.J_R[:], geo.p_G[:], geo.o_G[:], geo.J_G[:], geo.e_R_offset[:] = g.J_R, g.p_G, g.o_G, g.J_G, g.e_R_offset
     rows = (g.e_R, g.p_R, g.p_G, F_lat, residual, force, torque)

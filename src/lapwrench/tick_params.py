@@ -24,6 +24,7 @@ class TickParams(NamedTuple):
     length: float
     Kp: float
     Kd: float
+    rcm_feedforward: bool  # rcm.feedforward: cancel the velocity-product terms (wrenches/rcm.py)
     lateral: bool  # motion.rcm_task == "lateral"
     k_H: float
     k_min: int
@@ -61,6 +62,7 @@ class TickParams(NamedTuple):
             length=float(cfg.scope.length),
             Kp=float(cfg.rcm.Kp),
             Kd=float(cfg.rcm.Kd),
+            rcm_feedforward=bool(cfg.rcm.feedforward),
             lateral=m.rcm_task == "lateral",
             k_H=float(cfg.interaction.k_H),
             k_min=int(cfg.interaction.k_min),

@@ -12,6 +12,7 @@ from lapwrench.rcm.geometry import (
     closest_point_parameter,
     lateral_rcm_jacobian,
     rcm_error,
+    rcm_error_drift,
     rcm_jacobian,
 )
 from lapwrench.robot.model import RobotModel
@@ -31,6 +32,23 @@ def test_rcm_jacobian_matches_derivative_of_eq27(any_model: RobotModel, seed: in
     kin = kinematics_at_rest(any_model, q)
     np.testing.assert_allclose(rcm_jacobian(kin, p_R), J_num, atol=1e-6)
     np.testing.assert_allclose(lateral_rcm_jacobian(kin, p_R), kin.P @ J_num, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_rcm_error_drift_is_the_second_derivative_along_a_straight_joint_path(any_model: RobotModel,
+                                                                              seed: int) -> None:
+    """ë_R at θ̈ = 0, p̈_R = 0: e_R(q + t θ̇, p_R + t ṗ_R) differentiated twice in t (central differences),
+    with the adaptive point moving too."""
+    rng = np.random.default_rng(20 + seed)
+    q = random_configuration(any_model, rng)
+    dq, p_R_dot = rng.uniform(-1.0, 1.0, any_model.nv), rng.uniform(-0.05, 0.05, 3)
+    p_R = _rcm_point(any_model, q, rng)
+    h = 1e-4
+    e = [rcm_error(kinematics_at_rest(any_model, q + s * h * dq), p_R + s * h * p_R_dot) for s in (1.0, 0.0, -1.0)]
+    want = (e[0] - 2.0 * e[1] + e[2]) / h**2
+    got = rcm_error_drift(any_model.kinematics(q, dq), p_R, p_R_dot)
+    np.testing.assert_allclose(got, want, atol=1e-5 * max(1.0, float(np.abs(want).max())))
+    assert np.abs(want).max() > 1e-3  # a path that bends: the test can tell a wrong drift from zero
 
 
 @pytest.mark.parametrize("seed", range(5))

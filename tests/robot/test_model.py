@@ -27,6 +27,9 @@ def _reference_terms(model: RobotModel, q: np.ndarray, dq: np.ndarray) -> list[n
         o = pin.updateFramePlacement(m, d, frame)
         out += [o.translation, o.rotation]
     out.append(pin.getFrameJacobian(m, d, model.frame_E, pin.LOCAL_WORLD_ALIGNED))
+    fk = m.createData()  # {E}'s acceleration at zero joint acceleration, from a kinematics pass of its own
+    pin.forwardKinematics(m, fk, q, dq, np.zeros(m.nv))
+    out.append(pin.getFrameClassicalAcceleration(m, fk, model.frame_E, pin.LOCAL_WORLD_ALIGNED).vector)
     return [np.array(a, dtype=np.float64) for a in out]
 
 
@@ -45,6 +48,16 @@ def test_end_effector_jacobian(any_model: RobotModel, seed: int) -> None:
     J_w = numeric_jacobian(lambda x: R0 @ pin.log3(R0.T @ kinematics_at_rest(any_model, x).R_E), q)
     np.testing.assert_allclose(kin.J_E[3:], J_v, atol=1e-6)
     np.testing.assert_allclose(kin.J_E[:3], J_w, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_acceleration_at_rest_joints_is_the_time_derivative_of_the_twist(any_model: RobotModel, seed: int) -> None:
+    """a_E = J̇_E θ̇ (θ̈ = 0): the twist J_E(q + t θ̇) θ̇ differentiated in t by central differences."""
+    rng = np.random.default_rng(seed)
+    q, dq = random_configuration(any_model, rng), rng.uniform(-1.0, 1.0, any_model.nv)
+    h = 1e-6
+    twist = [any_model.kinematics(q + s * h * dq, dq).twist_E for s in (1.0, -1.0)]
+    np.testing.assert_allclose(any_model.kinematics(q, dq).a_E, (twist[0] - twist[1]) / (2 * h), atol=1e-6)
 
 
 def test_terms_equal_pinocchio_in_the_layouts_the_tick_is_bound_to(model: RobotModel) -> None:

@@ -38,6 +38,8 @@ from lapwrench.wrenches.registry import build_cues
 
 REGISTERED = plugins.names(plugins.CUE_GROUP)
 STATES = 6
+# A registered cue, a few ticks' (context, the tick's wrenches by name) and a controller.
+Case = tuple[Cue, list[tuple[TickContext, dict[str, np.ndarray]]], Controller]
 
 
 class Probe(Cue):
@@ -87,7 +89,7 @@ def _ticks(cfg: Config, seed: int) -> list[tuple[TickContext, dict[str, np.ndarr
 
 
 @pytest.fixture(scope="module", params=REGISTERED)
-def case(request: pytest.FixtureRequest) -> tuple[Cue, list[tuple[TickContext, dict[str, np.ndarray]]], Controller]:
+def case(request: pytest.FixtureRequest) -> Case:
     name = request.param
     cfg = _config(name)
     cue = next(c for c in build_cues(cfg) if c.name == name)
@@ -98,7 +100,7 @@ def test_the_paper_cues_are_registered_like_any_plugin() -> None:
     assert {"rcm", "interaction", "tracking", "viscous"} <= set(REGISTERED)
 
 
-def test_the_wrench_is_finite_and_zero_without_the_inputs_it_names(case) -> None:  # type: ignore[no-untyped-def]
+def test_the_wrench_is_finite_and_zero_without_the_inputs_it_names(case: Case) -> None:
     cue, ticks, _ = case
     for ctx, _ in ticks:
         w = cue.compute(ctx)
@@ -115,7 +117,7 @@ def _body_pose(ctrl: Controller, q: np.ndarray, offset_E: np.ndarray) -> tuple[n
     return kin.p_E + kin.R_E @ offset_E, kin.R_E
 
 
-def test_the_point_jacobian_matches_finite_differences(case) -> None:  # type: ignore[no-untyped-def]
+def test_the_point_jacobian_matches_finite_differences(case: Case) -> None:
     cue, ticks, ctrl = case
     h = 1e-6
     for ctx, _ in ticks:
@@ -136,7 +138,7 @@ def test_the_point_jacobian_matches_finite_differences(case) -> None:  # type: i
         np.testing.assert_allclose(J, J_fd, atol=1e-6)
 
 
-def test_moving_the_wrench_to_the_closest_point_keeps_its_torque(case) -> None:  # type: ignore[no-untyped-def]
+def test_moving_the_wrench_to_the_closest_point_keeps_its_torque(case: Case) -> None:
     cue, ticks, _ = case
     if cue.priority == "task":
         pytest.skip("the RCM cue acts at p_R through J_R")
@@ -148,7 +150,7 @@ def test_moving_the_wrench_to_the_closest_point_keeps_its_torque(case) -> None: 
         np.testing.assert_allclose(geo.J_G.T @ at_G, J_P.T @ w.vector, atol=1e-9 * (1 + np.abs(w.vector).max()))
 
 
-def test_the_damping_matrix_is_the_derivative_of_the_wrench(case) -> None:  # type: ignore[no-untyped-def]
+def test_the_damping_matrix_is_the_derivative_of_the_wrench(case: Case) -> None:
     cue, ticks, _ = case
     rng = np.random.default_rng(3)
     for ctx, _ in ticks:
@@ -164,7 +166,7 @@ def test_the_damping_matrix_is_the_derivative_of_the_wrench(case) -> None:  # ty
         np.testing.assert_allclose(dW, -D @ ctx.geometry.J_G @ (h * v), atol=1e-9)
 
 
-def test_a_compiled_cue_computes_what_the_compiled_tick_reports(case) -> None:  # type: ignore[no-untyped-def]
+def test_a_compiled_cue_computes_what_the_compiled_tick_reports(case: Case) -> None:
     cue, ticks, _ = case
     if not cue.fused:
         pytest.skip(f"{cue.name} runs in Python: compute is what the tick uses")

@@ -33,7 +33,7 @@ def _context(p_C: np.ndarray, dq: np.ndarray | None = None, seed: int = 0) -> Ti
     dq = np.zeros(N) if dq is None else dq
     kin = Kinematics(np.zeros(N), dq, np.eye(N), np.zeros(N), np.zeros(N), np.array([0.5, 0.0, 0.5]), np.eye(3),
                      np.zeros((6, N)), z3, np.eye(3), np.asarray(p_C, float), np.eye(3), np.array([0.0, 0.0, -1.0]),
-                     np.diag([1.0, 1.0, 0.0]))
+                     np.diag([1.0, 1.0, 0.0]), np.zeros(6))
     geo = TaskGeometry(z3, z3, z3, z3, np.zeros((3, N)), 0.0, P_G, z3, J_G, z3)
     return TickContext(0.0, kin, geo, ValidInputs())
 

@@ -30,7 +30,7 @@ def _context(points: np.ndarray | None, d_z: np.ndarray = DOWN) -> TickContext:
     z3, z6 = np.zeros(3), np.zeros((6, n))
     kin = Kinematics(np.zeros(n), np.zeros(n), np.eye(n), np.zeros(n), np.zeros(n), np.array([0.5, 0.0, 0.5]),
                      np.eye(3), z6, z3, np.eye(3), np.array([0.5, 0.0, 0.2]), np.eye(3), d_z,
-                     np.eye(3) - np.outer(d_z, d_z))
+                     np.eye(3) - np.outer(d_z, d_z), np.zeros(6))
     geo = TaskGeometry(z3, z3, z3, z3, np.zeros((3, n)), 0.0, np.array([0.5, 0.0, 0.25]), z3, z6, z3)
     obs = None if points is None else InstrumentObservation(np.asarray(points, float).reshape(-1, 2))
     return TickContext(0.0, kin, geo, ValidInputs(instruments=obs))

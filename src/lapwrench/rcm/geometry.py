@@ -136,6 +136,32 @@ def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
 
 
 @kernel
+def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
+    """ë_R when θ̈ = 0 and p̈_R = 0: the velocity-product part of the RCM error's acceleration,
+    ë_R = J_R θ̈ + (this), which eq (2) leaves uncompensated (:func:`lapwrench.wrenches.rcm.rcm_feedforward`).
+
+    With r = p_R - p_E, c = d_zᵀ r and e_R = r - c d_z (eq 27), ω, v the twist J_E θ̇ of {E} (eq 33)
+    and α, a its acceleration at θ̈ = 0 (``kin.a_E``):
+
+        ḋ_z = ω x d_z,  d̈_z = α x d_z + ω x ḋ_z,  ṙ = ṗ_R - v,  r̈ = -a,
+        ċ = ḋ_zᵀ r + d_zᵀ ṙ,  c̈ = d̈_zᵀ r + 2 ḋ_zᵀ ṙ + d_zᵀ r̈,
+        ë_R = r̈ - c̈ d_z - 2 ċ ḋ_z - c d̈_z.
+    """
+    d = kin.d_z
+    twist = matvec(kin.J_E, kin.dq)
+    w, v = twist[:3], twist[3:]
+    alpha, a = kin.a_E[:3], kin.a_E[3:]
+    r = p_R - kin.p_E
+    r_dot = rcm_velocity - v
+    d_dot = np.cross(w, d)
+    d_ddot = np.cross(alpha, d) + np.cross(w, d_dot)
+    c = inner(d, r)
+    c_dot = inner(d_dot, r) + inner(d, r_dot)
+    c_ddot = inner(d_ddot, r) + 2.0 * inner(d_dot, r_dot) - inner(d, a)
+    return -a - c_ddot * d - 2.0 * c_dot * d_dot - c * d_ddot
+
+
+@kernel
 def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
     s = _axial(kin, p_R) / length

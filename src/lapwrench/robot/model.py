@@ -34,7 +34,9 @@ class Kinematics(NamedTuple):
 
     ``J_E`` is the geometric Jacobian of the {E} origin ordered ``[J_Ew; J_Ev]`` (eq 33).
     ``d_z`` is the scope axis (eq 16) and ``P`` the projector orthogonal to it (eq 17), both
-    filled by :func:`scope_axis`.
+    filled by :func:`scope_axis`. ``a_E`` is {E}'s acceleration when θ̈ = 0, ``J̇_E θ̇`` ordered as
+    ``J_E`` (its angular part and its origin's classical linear acceleration): the velocity-product
+    part of the scope's motion (:func:`lapwrench.rcm.geometry.rcm_error_drift`).
     """
 
     q: Vec
@@ -51,6 +53,7 @@ class Kinematics(NamedTuple):
     R_C: Mat
     d_z: Vec
     P: Mat
+    a_E: Vec
 
     @property
     def twist_E(self) -> Vec:
@@ -74,7 +77,7 @@ def scope_axis(R_E: Mat) -> tuple[Vec, Mat]:
 class KinematicTerms(NamedTuple):
     """What Pinocchio gives per tick, before :func:`assemble_kinematics` (frames' origins and rotations in
     {B}; ``M_upper`` has only its upper triangle filled; ``J`` is Pinocchio's ``[J_v; J_ω]`` of {E},
-    LOCAL_WORLD_ALIGNED).
+    LOCAL_WORLD_ALIGNED; ``a`` its classical acceleration ``[a_v; a_ω]`` at θ̈ = 0, in the same frame).
 
     The arrays are Pinocchio's own, as it gives them (:meth:`RobotModel.terms`): its matrices are
     column-major (``M_upper``, the rotations); :func:`assemble_kinematics` copies everything into the
@@ -92,6 +95,7 @@ class KinematicTerms(NamedTuple):
     p_C: Vec
     R_C: Mat
     J: Mat
+    a: Vec
 
 
 @kernel
@@ -114,7 +118,7 @@ def symmetrise_into(A: Mat, A_upper: Mat) -> None:
 @kernel
 def assemble_kinematics(
     q: Vec, dq: Vec, M_upper: Mat, nle: Vec, gravity: Vec, p_E: Vec, R_E: Mat, p_H: Vec, R_H: Mat,
-    p_C: Vec, R_C: Mat, J: Mat,
+    p_C: Vec, R_C: Mat, J: Mat, a: Vec,
 ) -> Kinematics:
     """The tick's :class:`Kinematics` from Pinocchio's terms: M symmetrised, J_E = [J_ω; J_v] (eq 33),
     the scope axis (eqs 16-17); every array copied.
@@ -122,7 +126,7 @@ def assemble_kinematics(
     The arrays are disjoint views of one buffer: one allocation instead of fourteen (each costs about
     as much as a small equation's arithmetic)."""
     n = q.shape[0]
-    buf = np.empty(4 * n + n * n + 6 * n + 4 * 12)
+    buf = np.empty(4 * n + n * n + 6 * n + 4 * 12 + 6)
     q_, dq_, nle_, g_ = buf[0:n], buf[n:2 * n], buf[2 * n:3 * n], buf[3 * n:4 * n]
     at = 4 * n
     M = buf[at:at + n * n].reshape((n, n))
@@ -133,13 +137,15 @@ def assemble_kinematics(
     p_H_, R_H_ = buf[at + 12:at + 15], buf[at + 15:at + 24].reshape((3, 3))
     p_C_, R_C_ = buf[at + 24:at + 27], buf[at + 27:at + 36].reshape((3, 3))
     axis = ScopeAxis(p_E_, buf[at + 36:at + 39], buf[at + 39:at + 48].reshape((3, 3)))
+    a_E = buf[at + 48:at + 54]
     q_[:], dq_[:], nle_[:], g_[:] = q, dq, nle, gravity
+    a_E[:3], a_E[3:] = a[3:], a[:3]
     symmetrise_into(M, M_upper)
     J_E[:3] = J[3:]
     J_E[3:] = J[:3]
     R_E_[:], p_H_[:], R_H_[:], p_C_[:], R_C_[:] = R_E, p_H, R_H, p_C, R_C
     fill_scope_axis(axis, R_E, p_E)
-    return Kinematics(q_, dq_, M, nle_, g_, p_E_, R_E_, J_E, p_H_, R_H_, p_C_, R_C_, axis.d_z, axis.P)
+    return Kinematics(q_, dq_, M, nle_, g_, p_E_, R_E_, J_E, p_H_, R_H_, p_C_, R_C_, axis.d_z, axis.P, a_E)
 
 
 @kernel
@@ -219,8 +225,8 @@ class RobotModel:
 
         Pinocchio's arrays are handed out as they are: views of its memory (``data.M``, ``data.nle``, a
         frame's ``rotation`` and ``translation``), which track every update; its matrices are
-        column-major, and the compiled tick is bound to that layout. Only the Jacobian is a fresh array
-        per call.
+        column-major, and the compiled tick is bound to that layout. Only the Jacobian and {E}'s
+        acceleration are fresh arrays per call.
         """
         data, n = self.data, self.nv
         E, H, C = (data.oMf[f] for f in (self.frame_E, self.frame_H, self.frame_C))
@@ -238,14 +244,15 @@ class RobotModel:
         return self.scope.length
 
     def terms(self, q: Vec, dq: Vec) -> KinematicTerms:
-        """Pinocchio at (q, dq): one ``computeAllTerms``, the frame placements and the {E} Jacobian, as
+        """Pinocchio at (q, dq): one ``computeAllTerms``, the frame placements, the {E} Jacobian and {E}'s
+        acceleration at θ̈ = 0 (``computeAllTerms`` leaves the joints' at θ̈ = 0 in its data), as
         float64 arrays in the layouts the compiled tick is bound to (Pinocchio's own: its matrices are
         column-major).
 
         Hardly any allocation: q and dq are copied into this model's arrays, the rest are views of
         Pinocchio's memory, all overwritten by the next evaluation on this model (:meth:`terms`,
         :meth:`kinematics`, :meth:`mass_matrix_inverse`, :meth:`frame_pose`); only the Jacobian is
-        fresh. Use them before, or copy them (:meth:`kinematics` does)."""
+        fresh, as is {E}'s acceleration. Use them before, or copy them (:meth:`kinematics` does)."""
         model, data = self.model, self.data
         q = _vector_arg(q, model.nq, "q")
         dq = _vector_arg(dq, self.nv, "dq")
@@ -254,11 +261,12 @@ class RobotModel:
         J = pin.getFrameJacobian(model, data, self.frame_E, self._lwa)
         if not J.flags.c_contiguous:  # the layout the tick is bound to (Pinocchio gives it)
             J = np.ascontiguousarray(J)
+        a = pin.getFrameClassicalAcceleration(model, data, self.frame_E, self._lwa).np
         self._q[:] = q
         self._dq[:] = dq
         M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C = self._views
         # tuple.__new__: the named tuple without its keyword-handling constructor (this runs every tick)
-        return tuple.__new__(KinematicTerms, (self._q, self._dq, M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C, J))
+        return tuple.__new__(KinematicTerms, (self._q, self._dq, M, nle, g, p_E, R_E, p_H, R_H, p_C, R_C, J, a))
 
     def kinematics(self, q: Vec, dq: Vec) -> Kinematics:
         """Evaluate the model at (q, dq) (:meth:`terms`, :func:`assemble_kinematics`); fresh arrays."""

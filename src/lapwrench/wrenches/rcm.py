@@ -1,11 +1,15 @@
-"""The RCM constraint wrench W_r (eq 13-14), the task-space wrench."""
+"""The RCM constraint wrench W_r (eq 13-14), the task-space wrench, and the optional feed-forward that
+cancels the velocity-product terms eq (2) leaves in the RCM error's dynamics (``rcm.feedforward``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from lapwrench.allocation import weighted_pseudo_inverse
 from lapwrench.jit import kernel
-from lapwrench.spatial import Vec, Wrench
+from lapwrench.rcm.geometry import rcm_error_drift
+from lapwrench.robot.model import Kinematics, inverse_inertia
+from lapwrench.spatial import Mat, Vec, Wrench, matvec
 from lapwrench.wrenches.base import Cue, TickContext
 
 
@@ -18,10 +22,34 @@ def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     return F
 
 
+@kernel
+def rcm_feedforward(kin: Kinematics, Minv: Mat, J_R: Mat, J_pinv: Mat, drift: Vec) -> Vec:
+    """F_ff = -Λ_R (μ - J_R M⁻¹ C θ̇) at p_R: the force that cancels the velocity-product terms of the
+    RCM error's acceleration (a departure from eq 2, which has none; ``rcm.feedforward: false`` is the paper's).
+
+    With the model M θ̈ + C θ̇ = τ (eq 1, gravity compensated) and τ from eq (2), the dynamically
+    consistent null space drops out of J_R θ̈ and
+
+        ë_R = Λ_R⁻¹ F_r + μ - J_R M⁻¹ C θ̇,    Λ_R = (J_R M⁻¹ J_Rᵀ)⁻¹,
+
+    μ the drift :func:`~lapwrench.rcm.geometry.rcm_error_drift`. Without F_ff the RCM error is a
+    spring-damper (eq 14) driven by these terms, which grow with θ̇² and with Λ_R near a singularity.
+    Λ_R is taken from eq (4)'s J⁺ = M⁻¹ J_Rᵀ Λ_R as J⁺ᵀ M J⁺ (= Λ_R Λ_R⁻¹ Λ_R), so the lateral
+    task's exact pseudo-inverse carries over: no force along d_z.
+    """
+    n = kin.q.shape[0]
+    c = np.empty(n)
+    for i in range(n):
+        c[i] = kin.nle[i] - kin.gravity[i]  # C θ̇
+    mu = drift - matvec(J_R, matvec(Minv, c))
+    return -matvec(J_pinv.T, matvec(kin.M, matvec(J_pinv, mu)))
+
+
 class RcmCue(Cue):
     """Eq (13): W_r = [0; F_r] about p_R, applied through J_R in the task space (eq 2).
 
-    Parameters: the ``rcm:`` section (K_p, K_d). The primary task: it cannot be switched off.
+    Parameters: the ``rcm:`` section (K_p, K_d, ``feedforward``: F_r plus :func:`rcm_feedforward`). The
+    primary task: it cannot be switched off.
     """
 
     priority = "task"
@@ -31,4 +59,11 @@ class RcmCue(Cue):
     def compute(self, ctx: TickContext) -> Wrench:
         g = ctx.geometry
         # e_R at the reference plus what the measured pose adds (motion/measured_feedback.py)
-        return Wrench(np.zeros(3), rcm_force(g.e_R + g.e_R_offset, g.e_R_rate, self.params.Kp, self.params.Kd), g.p_R)
+        F = rcm_force(g.e_R + g.e_R_offset, g.e_R_rate, self.params.Kp, self.params.Kd)
+        if self.params.feedforward:
+            kin = ctx.kin
+            Minv = inverse_inertia(kin.M)
+            lateral = self.cfg.motion.rcm_task == "lateral"
+            J_pinv = weighted_pseudo_inverse(g.J_R, Minv, kin.d_z) if lateral else weighted_pseudo_inverse(g.J_R, Minv)
+            F = F + rcm_feedforward(kin, Minv, g.J_R, J_pinv, rcm_error_drift(kin, g.p_R, g.rcm_velocity))
+        return Wrench(np.zeros(3), F, g.p_R)
