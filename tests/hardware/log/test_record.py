@@ -59,3 +59,38 @@ def test_a_cycle_record_carries_the_python_cues_telemetry() -> None:
     got = rec.to_dict((("keep_out", ("distance", "barrier")),))["telemetry"]
     assert got == {"keep_out": {"distance": distance, "barrier": barrier}} and distance > 0.2
     assert rec.to_dict()["telemetry"] == {}  # a log that names no telemetry fields carries none
+
+
+def test_each_field_of_a_cycle_record_is_the_cycle_value_it_names() -> None:
+    """Every field holds its own source (each a distinct object), none another's: the record is built by
+    position, so a field added or moved in :class:`CycleRecord` must not shift the others."""
+    import dataclasses
+
+    from lapwrench.controller import TickResult
+    from lapwrench.hardware.log.record import CycleRecord
+    from lapwrench.sensors import InstrumentObservation, TactileReading
+
+    def v(n: int = 3) -> np.ndarray:
+        return np.zeros(n)
+
+    wrenches, telemetry, e_R = {"rcm": v(6)}, {"zoom": (0.5,)}, np.array([3e-4, 4e-4, 0.0])
+    r = TickResult(0.4, v(7), v(7), v(7), v(7), wrenches, v(6), e_R, v(), v(), 1.3, 12, "tracking", v(),
+                   telemetry=telemetry)
+    ft = ForceTorqueReading(v(), v(), 0.45)
+    frame = SensorFrame(0.5, ft, TactileReading(v(64), 0.45), InstrumentObservation(np.zeros((1, 2)), 0.4))
+    reading = RobotReading(v(7), v(7), v(), 0.501)
+    c = Cycle(7, frame, reading, r, MeasuredScope(2e-4, 0.06), v(7), 3e-4, 1e-3, [])  # type: ignore[arg-type]
+    tau_J = v(7)
+    rec = cycle_record(c, "running", True, tau_J=tau_J)
+    sources = {
+        "t": 0.5, "robot_time": 0.501, "k": 7, "q": reading.q, "dq": reading.dq, "tau_J": tau_J,
+        "external_force": reading.external_force, "ft_force": ft.force, "ft_torque": ft.torque,
+        "tactile": frame.tactile.values, "instruments": frame.instruments.points, "wrenches": wrenches,
+        "mode": "tracking", "delta": 1.3, "contacts": 12, "p_R": r.p_R, "e_R": e_R, "rcm_error": r.rcm_error,
+        "rcm_error_measured": 2e-4, "q_ref": r.q_ref, "q_cmd": c.q_cmd, "supervisor": "running", "alarm": True,
+        "compute_us": 3e-4 * 1e6, "cycle_us": 1e-3 * 1e6, "p_G": r.p_G, "telemetry": telemetry,
+    }  # fmt: skip
+    assert set(sources) == {f.name for f in dataclasses.fields(CycleRecord)}
+    for name, source in sources.items():
+        got = getattr(rec, name)
+        assert got is source if isinstance(source, (np.ndarray, dict)) else got == source, name

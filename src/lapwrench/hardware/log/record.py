@@ -118,17 +118,19 @@ class CycleRecord:
 
 def cycle_record(c: Cycle, supervisor: str, alarm: bool, tau_J: Any = None) -> CycleRecord | None:
     """The record of one loop cycle (None after a failed tick: nothing to log but its events), with the
-    supervisor's state and alarm flag after it and the robot's measured joint torques if it has them."""
+    supervisor's state and alarm flag after it and the robot's measured joint torques if it has them.
+
+    The loop builds one every cycle, so the fields are passed by position, in :class:`CycleRecord`'s
+    order (a call with 27 keywords costs twice as much)."""
     r, frame, reading = c.result, c.frame, c.reading
     if r is None:
         return None
     ft, ta, ins = frame.ft, frame.tactile, frame.instruments
     return CycleRecord(
-        t=frame.time, robot_time=reading.stamp, k=c.k, q=reading.q, dq=reading.dq, tau_J=tau_J,
-        external_force=reading.external_force, ft_force=None if ft is None else ft.force,
-        ft_torque=None if ft is None else ft.torque, tactile=None if ta is None else ta.values,
-        instruments=None if ins is None else ins.points, wrenches=r.wrenches, mode=r.mode, delta=r.delta,
-        contacts=r.contacts, p_R=r.p_R, p_G=r.p_G, e_R=r.e_R, rcm_error=r.rcm_error,
-        rcm_error_measured=c.scope.rcm_error, q_ref=r.q_ref, q_cmd=c.q_cmd, supervisor=supervisor, alarm=alarm,
-        compute_us=c.compute * 1e6, cycle_us=c.period * 1e6, telemetry=r.telemetry,
+        frame.time, reading.stamp, c.k, reading.q, reading.dq, tau_J,  # t, robot_time, k, q, dq, tau_J
+        reading.external_force, None if ft is None else ft.force, None if ft is None else ft.torque,
+        None if ta is None else ta.values, None if ins is None else ins.points,  # ... tactile, instruments
+        r.wrenches, r.mode, r.delta, r.contacts, r.p_R, r.e_R, r.rcm_error,  # wrenches ... rcm_error
+        c.scope.rcm_error, r.q_ref, c.q_cmd, supervisor, alarm,  # rcm_error_measured ... alarm
+        c.compute * 1e6, c.period * 1e6, r.p_G, r.telemetry,  # compute_us, cycle_us, p_G, telemetry
     )

@@ -4,6 +4,7 @@ with its events, into the bus's bounded rings (:class:`ShmLogSink`)."""
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -23,6 +24,95 @@ _TELEMETRY_PLACES = 2 * _N_WRENCH + MAX_TELEMETRY + 1
 then -2 (the end); room for every cue's header and all the telemetry values the configuration allows."""
 
 
+def _row_offsets(spec: tuple[tuple[str, str, int], ...]) -> tuple[dict[str, int], int]:
+    """Where each field of ``spec`` (name, kind, count) starts in a row, and the row's width: a plain
+    value ("f") takes one place, a vector ("v") its count, an optional vector ("o") a presence flag and its
+    count, the points ("p") their number (-1 = absent) and two places each, the wrenches ("w") a
+    :data:`_WRENCH_SLOT` each, an interned string ("s") one, an optional value ("n") a flag and the value,
+    the telemetry ("t") its places."""
+    off, o = {}, 0
+    for name, kind, n in spec:
+        off[name] = o
+        o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": _WRENCH_SLOT * n, "s": 1, "n": 2, "t": n}[kind]
+    return off, o
+
+
+_SPEC: tuple[tuple[str, str, int], ...] = (
+    ("t", "f", 1), ("robot_time", "f", 1), ("k", "f", 1), ("n_joints", "f", 1), ("mode", "s", 1), ("delta", "f", 1),
+    ("contacts", "f", 1), ("rcm_error", "f", 1), ("rcm_error_measured", "n", 1), ("supervisor", "s", 1),
+    ("alarm", "f", 1), ("compute_us", "f", 1), ("cycle_us", "f", 1),
+    ("q", "v", MAX_JOINTS), ("dq", "v", MAX_JOINTS), ("tau_J", "o", MAX_JOINTS), ("external_force", "o", 3),
+    ("ft_force", "o", 3), ("ft_torque", "o", 3), ("tactile", "o", TACTILE_N), ("instruments", "p", MAX_POINTS),
+    ("wrenches", "w", _N_WRENCH), ("p_R", "v", 3), ("e_R", "v", 3), ("q_ref", "v", MAX_JOINTS),
+    ("q_cmd", "v", MAX_JOINTS), ("telemetry", "t", _TELEMETRY_PLACES),
+)  # fmt: skip
+"""The fields of a cycle row, in order (name, kind, places: :func:`_row_offsets`). The plain values come
+first, in one block that :meth:`CycleCodec.encode` writes in one call (:func:`_put_values`); the layout
+is the bus's only (parent and child are the same version), never on disk."""
+_OFF, _WIDTH = _row_offsets(_SPEC)
+_HEAD = _OFF["q"]
+"""Places of the plain values' block at the start of a row (t ... cycle_us)."""
+# the offsets the encoder uses every cycle, as module constants (a dict lookup each costs more)
+_Q, _DQ, _TAU_J, _EXTERNAL_FORCE, _FT_FORCE, _FT_TORQUE, _TACTILE, _INSTRUMENTS, _WRENCHES = (
+    _OFF[n] for n in ("q", "dq", "tau_J", "external_force", "ft_force", "ft_torque", "tactile", "instruments",
+                      "wrenches")
+)
+_P_R, _E_R, _Q_REF, _Q_CMD, _TELEMETRY = (_OFF[n] for n in ("p_R", "e_R", "q_ref", "q_cmd", "telemetry"))
+_DOUBLES = tuple(struct.Struct(f"{n}d") for n in range(max(_HEAD, _TELEMETRY_PLACES) + 1))
+"""``_DOUBLES[n]`` packs n native float64 values (:func:`_put_values`)."""
+
+
+def _put_values(view: memoryview, row: np.ndarray, o: int, values: tuple[Any, ...]) -> None:
+    """Plain values (floats, ints, bools) into ``row[o : o + len(values)]`` (``view`` is ``memoryview(row)``).
+
+    One ``struct`` call packs them all as float64, a fraction of what a numpy item assignment costs
+    each. What it does not take as a number (``None``, a string) goes through numpy, which converts it
+    as it always did (``None`` is NaN); what numpy refuses raises. The same values either way."""
+    try:
+        _DOUBLES[len(values)].pack_into(view, 8 * o, *values)
+    except (struct.error, TypeError, ValueError, OverflowError):
+        row[o : o + len(values)] = values
+
+
+def _put_vector(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> None:
+    """``v``'s ``n`` values into ``row[o : o + n]`` (``view`` is ``memoryview(row)``).
+
+    What the loop hands over is a float64 array: the memoryview copies it as it is, in a third to a half
+    of the time numpy's item assignment takes. Anything else (a list, another dtype, a shape numpy broadcasts)
+    is refused by the memoryview before it writes anything and goes through numpy, which converts it as
+    it always did; what numpy refuses raises. The same values in the row either way."""
+    try:
+        view[o : o + n] = v
+    except (TypeError, ValueError, NotImplementedError):
+        row[o : o + n] = v
+
+
+def _put_optional(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> None:
+    """An optional vector at ``o``: its presence flag (0 for ``None``, which writes nothing else, 1), then its
+    ``n`` values (:func:`_put_vector`)."""
+    if v is None:
+        view[o] = 0.0
+    else:
+        view[o] = 1.0
+        _put_vector(view, row, o + 1, n, v)
+
+
+def _put_points(view: memoryview, row: np.ndarray, o: int, points: Any) -> None:
+    """The instrument points at ``o``: their number (-1 for ``None``), then x, y of each (the values in
+    order, whatever the shape); at most :data:`~lapwrench.hardware.rt.sizes.MAX_POINTS`, the first ones."""
+    if points is None:
+        view[o] = -1.0
+        return
+    flat = (points if isinstance(points, np.ndarray) else np.asarray(points, dtype=float)).reshape(-1)
+    n = len(flat)
+    if n % 2:
+        raise ValueError(f"instrument points need an x and a y each, got {n} values")
+    if n > 2 * MAX_POINTS:
+        flat, n = flat[: 2 * MAX_POINTS], 2 * MAX_POINTS
+    view[o] = n // 2
+    _put_vector(view, row, o + 1, n, flat)
+
+
 class CycleCodec:
     """Packs a :class:`~lapwrench.hardware.log.CycleRecord` into one float64 row and back.
 
@@ -40,32 +130,18 @@ class CycleCodec:
     """
 
     N_WRENCH = _N_WRENCH
-    _spec: tuple[tuple[str, str, int], ...] = (
-        ("t", "f", 1), ("robot_time", "f", 1), ("k", "f", 1), ("n_joints", "f", 1), ("q", "v", MAX_JOINTS),
-        ("dq", "v", MAX_JOINTS), ("tau_J", "o", MAX_JOINTS), ("external_force", "o", 3), ("ft_force", "o", 3),
-        ("ft_torque", "o", 3), ("tactile", "o", TACTILE_N), ("instruments", "p", MAX_POINTS),
-        ("wrenches", "w", N_WRENCH), ("mode", "s", 1), ("delta", "f", 1), ("contacts", "f", 1), ("p_R", "v", 3),
-        ("e_R", "v", 3), ("rcm_error", "f", 1), ("rcm_error_measured", "n", 1), ("q_ref", "v", MAX_JOINTS),
-        ("q_cmd", "v", MAX_JOINTS), ("supervisor", "s", 1), ("alarm", "f", 1), ("compute_us", "f", 1),
-        ("cycle_us", "f", 1), ("telemetry", "t", _TELEMETRY_PLACES),
-    )
-    OFF: ClassVar[dict[str, int]] = {}
-    WIDTH = 0
-
-    @classmethod
-    def _build(cls) -> None:
-        o = 0
-        for name, kind, n in cls._spec:
-            cls.OFF[name] = o
-            o += {"f": 1, "v": n, "o": 1 + n, "p": 1 + 2 * n, "w": _WRENCH_SLOT * n, "s": 1, "n": 2, "t": n}[kind]
-        cls.WIDTH = o
+    OFF: ClassVar[dict[str, int]] = _OFF
+    WIDTH = _WIDTH
 
     def __init__(self, announce: Callable[[str, str], bool] | None = None) -> None:
         self.announce = announce
         self.tables: dict[str, list[str]] = {"mode": [], "supervisor": [], "wrench": []}
         self._index: dict[str, dict[str, int]] = {"mode": {}, "supervisor": {}, "wrench": {}}
+        self._modes, self._states, self._names = (self._index[t] for t in ("mode", "supervisor", "wrench"))
 
     def intern(self, table: str, s: str) -> int:
+        """The number of ``s`` in ``table``; a new string is announced first (-1 when it cannot be: the
+        row then reads "?" and the next row tries again)."""
         idx = self._index[table]
         i = idx.get(s)
         if i is None:
@@ -83,71 +159,71 @@ class CycleCodec:
             self.tables[table].append(name)
 
     def encode(self, row: np.ndarray, r: CycleRecord) -> None:
-        off = self.OFF
+        """``r`` into ``row`` (float64, :attr:`WIDTH` places, C-contiguous: a ring slot); raises on a
+        record of an unexpected shape.
+
+        The real-time child runs this every cycle, so it costs the loop as little as it can: the plain
+        values go in one call (:func:`_put_values`), the vectors through the row's memoryview
+        (:func:`_put_vector`), the offsets are module constants, and a name already interned is found
+        in the index without a call to :meth:`intern`."""
         nj = len(r.q)
         if nj > MAX_JOINTS:
             raise ValueError(f"a cycle row holds at most {MAX_JOINTS} joints, the record has {nj}")
-        row[0] = r.t
-        row[1] = r.robot_time
-        row[2] = r.k
-        row[off["n_joints"]] = nj
-        row[off["q"] : off["q"] + nj] = r.q
-        row[off["dq"] : off["dq"] + nj] = r.dq
-        optional = (("tau_J", nj), ("external_force", 3), ("ft_force", 3), ("ft_torque", 3), ("tactile", TACTILE_N))
-        for name, n in optional:
-            o = off[name]
-            v = getattr(r, name)
-            if v is None:
-                row[o] = 0.0
-            else:
-                row[o] = 1.0
-                row[o + 1 : o + 1 + n] = v
-        o = off["instruments"]
-        if r.instruments is None:
-            row[o] = -1.0
-        else:
-            pts = np.asarray(r.instruments, dtype=float).reshape(-1, 2)[:MAX_POINTS]
-            row[o] = len(pts)
-            row[o + 1 : o + 1 + 2 * len(pts)] = pts.ravel()
-        o = off["wrenches"]
-        row[o : o + _WRENCH_SLOT * self.N_WRENCH : _WRENCH_SLOT] = -2.0
-        for i, (name, w) in enumerate(list(r.wrenches.items())[: self.N_WRENCH]):
-            s = o + _WRENCH_SLOT * i
-            row[s] = self.intern("wrench", name)
-            row[s + 1 : s + _WRENCH_SLOT] = w
-        row[off["mode"]] = self.intern("mode", r.mode)
-        row[off["delta"]] = r.delta
-        row[off["contacts"]] = r.contacts
-        row[off["p_R"] : off["p_R"] + 3] = r.p_R
-        row[off["e_R"] : off["e_R"] + 3] = r.e_R
-        row[off["rcm_error"]] = r.rcm_error
-        o = off["rcm_error_measured"]
-        row[o] = 0.0 if r.rcm_error_measured is None else 1.0
-        row[o + 1] = math.nan if r.rcm_error_measured is None else r.rcm_error_measured
-        row[off["q_ref"] : off["q_ref"] + nj] = r.q_ref
-        row[off["q_cmd"] : off["q_cmd"] + nj] = r.q_cmd
-        row[off["supervisor"]] = self.intern("supervisor", r.supervisor)
-        row[off["alarm"]] = 1.0 if r.alarm else 0.0
-        row[off["compute_us"]] = r.compute_us
-        row[off["cycle_us"]] = r.cycle_us
-        self._encode_telemetry(row, r.telemetry)
+        view = memoryview(row)
+        self._encode_wrenches(view, row, r.wrenches)  # before the telemetry: their names share a table
+        mode, state, measured = self._modes.get(r.mode), self._states.get(r.supervisor), r.rcm_error_measured
+        _put_values(view, row, 0, (
+            r.t, r.robot_time, r.k, nj, self.intern("mode", r.mode) if mode is None else mode, r.delta, r.contacts,
+            r.rcm_error, 0.0 if measured is None else 1.0, math.nan if measured is None else measured,
+            self.intern("supervisor", r.supervisor) if state is None else state, 1.0 if r.alarm else 0.0,
+            r.compute_us, r.cycle_us,
+        ))  # fmt: skip
+        _put_vector(view, row, _Q, nj, r.q)
+        _put_vector(view, row, _DQ, nj, r.dq)
+        _put_optional(view, row, _TAU_J, nj, r.tau_J)
+        _put_optional(view, row, _EXTERNAL_FORCE, 3, r.external_force)
+        _put_optional(view, row, _FT_FORCE, 3, r.ft_force)
+        _put_optional(view, row, _FT_TORQUE, 3, r.ft_torque)
+        _put_optional(view, row, _TACTILE, TACTILE_N, r.tactile)
+        _put_points(view, row, _INSTRUMENTS, r.instruments)
+        _put_vector(view, row, _P_R, 3, r.p_R)
+        _put_vector(view, row, _E_R, 3, r.e_R)
+        _put_vector(view, row, _Q_REF, nj, r.q_ref)
+        _put_vector(view, row, _Q_CMD, nj, r.q_cmd)
+        self._encode_telemetry(view, row, r.telemetry)
 
-    def _encode_telemetry(self, row: np.ndarray, telemetry: dict[str, Any] | None) -> None:
-        """Each cue's name, value count and values, then the end mark (-2); cut at the row's room."""
-        o = self.OFF["telemetry"]
+    def _encode_wrenches(self, view: memoryview, row: np.ndarray, wrenches: dict[str, Any]) -> None:
+        """The first :attr:`N_WRENCH` wrenches, each its interned name and 6 values; -2 (none) in the
+        name of every slot left."""
+        names = self._names
+        s, end = _WRENCHES, _WRENCHES + _WRENCH_SLOT * _N_WRENCH
+        for name, w in wrenches.items():
+            if s == end:
+                break
+            i = names.get(name)
+            view[s] = self.intern("wrench", name) if i is None else i
+            _put_vector(view, row, s + 1, _WRENCH_SLOT - 1, w)
+            s += _WRENCH_SLOT
+        for free in range(s, end, _WRENCH_SLOT):
+            view[free] = -2.0
+
+    def _encode_telemetry(self, view: memoryview, row: np.ndarray, telemetry: dict[str, Any] | None) -> None:
+        """Each cue's interned name, value count and values (:func:`_put_values`), then the end mark (-2);
+        cut at the row's room."""
+        names = self._names
+        o = _TELEMETRY
         end = o + _TELEMETRY_PLACES - 1  # the last place is kept for the end mark
         for name, values in (telemetry or {}).items():
             n = len(values)
             if o + 2 + n > end:
                 break
-            row[o] = self.intern("wrench", name)
-            row[o + 1] = n
-            row[o + 2 : o + 2 + n] = values
+            i = names.get(name)
+            _put_values(view, row, o, (self.intern("wrench", name) if i is None else i, n, *values))
             o += 2 + n
-        row[o] = -2.0
+        view[o] = -2.0
 
     def _decode_telemetry(self, row: np.ndarray) -> dict[str, tuple[float, ...]]:
-        o = self.OFF["telemetry"]
+        o = _TELEMETRY
         end = o + _TELEMETRY_PLACES - 1
         out = {}
         while o < end and row[o] >= -1:
@@ -206,7 +282,6 @@ class CycleCodec:
         )
 
 
-CycleCodec._build()
 INTERN = "__intern__"
 
 
