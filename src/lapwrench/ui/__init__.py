@@ -15,5 +15,6 @@ Modules, one job each:
 - :mod:`.view`: the laparoscope view rendered in its own thread, annotated.
 - :mod:`.scene`: the 3D scene from the MuJoCo geoms, and the force arrows.
 - :mod:`.controls`, :mod:`.params`, :mod:`.plots`: the page's panels.
+- :mod:`.untrusted`: what viser refuses from a client (garbage on the WebSocket), one line each.
 - :mod:`.app`: the viser server tying them together; :mod:`.cli`: the ``ui`` command.
 """

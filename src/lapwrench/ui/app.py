@@ -7,6 +7,9 @@ page thread (:meth:`UiApp.run_forever` or :meth:`UiApp.start`), which draws the 
 into the scene at :data:`PAGE_HZ` (and at once when a snapshot first shows a changed hand, so a push
 is not kept waiting for the next update), refreshes the plots at :data:`PLOT_HZ` and the status line.
 Neither steps the simulation, so a slow browser slows the page, not the control loop.
+
+What a client sends that viser refuses is told in one line each, rate-limited
+(:class:`~lapwrench.ui.untrusted.UntrustedClients`), instead of a library's traceback.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from lapwrench.ui.plots import LivePlots, plot_specs
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.scene import SceneDrawer, cue_color
 from lapwrench.ui.session import Session
+from lapwrench.ui.untrusted import UntrustedClients
 from lapwrench.ui.view import RENDER_NICE, LaparoscopeView, view_size
 
 PAGE_HZ = 20.0  # scene updates per second
@@ -57,10 +61,12 @@ class UiApp:
         if opts.port and self.server.get_port() != opts.port:  # viser tries the next ports when one is taken
             self.server.stop()
             raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))
+        self.untrusted = UntrustedClients(self.server)  # a client's garbage: one line, not a traceback
         try:
             self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
         except BaseException:
             self.server.stop()
+            self.untrusted.close()
             raise
         self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
         # No shadows and no environment map (image-based lighting): in a browser without a GPU (software
@@ -136,6 +142,7 @@ class UiApp:
         if self._thread is not None:
             self._thread.join(5.0)
         self.server.stop()
+        self.untrusted.close()
         self.session.closed.world.close()
 
     # -- the page thread ----------------------------------------------------------------------

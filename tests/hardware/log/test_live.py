@@ -4,6 +4,7 @@ real WebSocket client speaking Foxglove's protocol (foxglove.sdk.v1)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import socket
 import struct
@@ -13,6 +14,7 @@ from typing import Any
 
 import pytest
 from hardware.log.support import record
+from helpers import wait_until
 
 from lapwrench.hardware.log import RunLogger
 from lapwrench.hardware.log.live import ROBOT_DESCRIPTION_TOPIC, LiveError, urdf_with_assets
@@ -143,3 +145,105 @@ def test_the_live_view_draws_each_detection_and_ignores_non_finite_points() -> N
     ring = img[294:307, 94:107]
     assert (ring[..., 1] > 200).any() and (ring[..., 0] < 50).all()  # a green mark at the detection
     assert not (annotated_view(blank, None, load(), "")[294:307, 94:107, 1] > 200).any()
+
+
+def test_the_incident_log_prints_a_burst_per_window_on_one_line_each_and_counts_the_rest(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from lapwrench.hardware.log.live import INCIDENT_CHARS, IncidentLog
+
+    now = [0.0]
+    log = IncidentLog("lapwrench run", burst=3, window=10.0, clock=lambda: now[0])
+    shown = [log.report(f"incident {i}") for i in range(5)]
+    assert shown == [True, True, True, False, False]
+    now[0] = 9.9  # the same window
+    assert not log.report("incident 5")
+    now[0] = 10.0
+    assert log.report("a client's \x1b[2J garbage\nwith a newline " + "x" * 500)
+    log.report("incident 7")
+    log.report("incident 8")
+    log.report("incident 9")  # held back
+    log.close()
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[:3] == [f"lapwrench run: incident {i}" for i in range(3)]
+    assert lines[3].startswith("lapwrench run: a client's  [2J garbage with a newline xxx")
+    suffix = " (and 3 more not shown)"
+    assert lines[3].endswith(f"…{suffix}") and len(lines[3]) == INCIDENT_CHARS + len(suffix)
+    assert lines[4:] == ["lapwrench run: incident 7", "lapwrench run: incident 8",
+                         "lapwrench run: 1 more incidents from network clients not shown"]
+    assert (log.total, log.printed, log.held_back) == (10, 6, 0)
+    with pytest.raises(ValueError, match="at least one line"):
+        IncidentLog("x", burst=0)
+
+
+def _raw_client(port: int, data: bytes, reset: bool = False) -> None:
+    """A TCP client that sends ``data`` and goes away (with a reset: mid-message)."""
+    with socket.socket() as s:
+        s.connect(("127.0.0.1", port))
+        s.sendall(data)
+        time.sleep(0.2)
+        if reset:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+
+
+async def _garbage(port: int, *frames: str | bytes, protocol: str = PROTOCOL) -> None:
+    """A client that says hello and sends ``frames``, then waits for what the server answers."""
+    try:
+        async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=None) as ws:
+            await asyncio.wait_for(ws.recv(), 5.0)
+            for frame in frames:
+                await ws.send(frame)
+            with contextlib.suppress(TimeoutError):
+                while True:
+                    await asyncio.wait_for(ws.recv(), 0.3)
+    except (websockets.ConnectionClosed, websockets.InvalidHandshake):
+        pass
+
+
+async def _server_info(port: int) -> dict[str, Any]:
+    async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[PROTOCOL]) as ws:
+        return dict(json.loads(await asyncio.wait_for(ws.recv(), 5.0)))
+
+
+def test_garbage_sent_to_the_live_server_is_one_line_each_in_lapwrench_words_and_a_flood_one_burst(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """foxglove-sdk refuses the garbage and logs it in its words, one record each (printed as such by
+    Python's last-resort handler, however many): here each is a line of the run's incident log, and a
+    flood (the log's clock standing still) is one burst of lines and a count."""
+    import logging
+
+    from lapwrench.hardware.log.live import FOXGLOVE_LOG, INCIDENT_BURST
+
+    with socket.socket() as s:  # a port nobody else uses, to tell foxglove's lines from others
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    logger = RunLogger(None, None, live=("127.0.0.1", port))
+    try:
+        assert logger.live is not None
+        incidents = logger.live.incidents
+        incidents.clock = lambda: 0.0
+        steps: list[Any] = [
+            lambda: asyncio.run(_garbage(port, "not json")),
+            lambda: asyncio.run(_garbage(port, json.dumps({"op": "explode"}))),
+            lambda: asyncio.run(_garbage(port, b"\xff\x00junk")),
+            lambda: _raw_client(port, b"\x16\x03\x01 junk, not HTTP\r\n\r\n"),
+            lambda: asyncio.run(_garbage(port, protocol="not-foxglove")),
+        ]
+        for k, step in enumerate(steps, 1):
+            step()
+            assert wait_until(lambda k=k: incidents.total >= k, 10)
+        asyncio.run(_garbage(port, *["not json"] * 30))  # a flood
+        assert wait_until(lambda: incidents.total >= len(steps) + 30, 10)
+        assert asyncio.run(_server_info(port))["op"] == "serverInfo"
+    finally:
+        logger.close()
+    assert FOXGLOVE_LOG not in logging.getLogger("foxglove").handlers
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("lapwrench run: ")]
+    assert len(lines) == INCIDENT_BURST + 1 and incidents.printed == INCIDENT_BURST
+    prefix = "lapwrench run: Foxglove server: "
+    assert lines[0].startswith(f"{prefix}ignored a malformed message from 127.0.0.1:")
+    assert lines[1].startswith(f"{prefix}ignored a malformed message from 127.0.0.1:") and "explode" in lines[1]
+    assert lines[2].startswith(f"{prefix}ignored a malformed message from 127.0.0.1:") and "opcode 255" in lines[2]
+    assert lines[3].startswith(f"{prefix}refused a connection from 127.0.0.1:")
+    assert lines[-1].endswith(" more incidents from network clients not shown")
+    assert "Invalid message from" not in err and "Traceback" not in err

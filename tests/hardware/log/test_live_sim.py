@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import wait_until
 
 from lapwrench.config import load
 from lapwrench.hardware.log import RunLogger, read_log
@@ -135,3 +136,25 @@ def test_the_cues_telemetry_reaches_foxglove_live(capsys: pytest.CaptureFixture[
     assert len(zoom) >= 15 and all(z is not None and set(z) == {"spread", "in_band", "force"} for z in zoom)
     seen = [z for z in zoom if z["spread"] is not None]  # the detector sees both instruments after a few frames
     assert seen and all(z["spread"] > 0 and z["in_band"] in (0.0, 1.0) and z["force"] is not None for z in seen)
+
+
+def test_a_malformed_message_to_a_simulations_live_server_is_one_line_of_its_command(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """``demo --foxglove``: garbage from a Foxglove client is a line of ``lapwrench demo``, in lapwrench's
+    words (foxglove-sdk's own record said 'Invalid message from ...', once per message, unlimited)."""
+    websockets = pytest.importorskip("websockets")
+
+    async def garbage(port: int) -> None:
+        async with websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"]) as ws:
+            await asyncio.wait_for(ws.recv(), 5.0)
+            await ws.send("not json")
+            await asyncio.sleep(0.3)
+
+    with live_simulation(("127.0.0.1", 0), "panda", "lapwrench demo") as live:
+        assert live.logger.live is not None
+        asyncio.run(garbage(live.logger.live.address[1]))
+        assert wait_until(lambda: live.logger.live is not None and live.logger.live.incidents.total == 1, 10)
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if "malformed" in line]
+    assert len(lines) == 1
+    assert lines[0].startswith("lapwrench demo: Foxglove server: ignored a malformed message from 127.0.0.1:")

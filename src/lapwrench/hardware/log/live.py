@@ -11,13 +11,27 @@ wall-clock time, so a client that connects later gets it). Its mesh files are na
 and served by the server's asset handler, which answers for exactly those files and nothing else.
 Open Foxglove, "Open connection", ``ws://127.0.0.1:8765``, then import the layout
 ``lapwrench/data/foxglove/lapwrench.json`` (README, "Live telemetry").
+
+A client that sends garbage (malformed JSON, unknown ops, binary junk, a frame over the size limit, a
+broken handshake, a connection dropped mid-message) is foxglove-sdk's to refuse; what its Rust core
+logs about it (through Python's :mod:`logging`, under the ``foxglove`` logger) becomes one line per
+incident on stderr, ``lapwrench run: Foxglove server: ignored a malformed message from
+127.0.0.1:53412: ...``, at most :data:`INCIDENT_BURST` lines in :data:`INCIDENT_WINDOW_S` seconds
+(:class:`IncidentLog`, :class:`FoxgloveLog`), so a flood of garbage cannot fill the terminal.
+:mod:`lapwrench.ui.untrusted` does the same for the page's viser server.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
+import re
+import sys
+import threading
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +41,135 @@ DESCRIPTION_PERIOD_S = 1.0  # wall-clock: a client that connects later gets it w
 LiveAddress = tuple[str, int]  # (host, port), as lapwrench.cli_types.host_port parses it
 
 
+INCIDENT_BURST = 5  # lines about misbehaving network clients, at most, in each window...
+INCIDENT_WINDOW_S = 10.0  # ...of this many seconds (wall clock): a flood cannot fill the terminal
+INCIDENT_CHARS = 200  # an incident's line is cut to this many characters
+
+
 class LiveError(RuntimeError):
     """The server could not start (port taken, host unknown)."""
+
+
+class IncidentLog:
+    """One line on stderr, ``<who>: <what>``, for each thing a network client did wrong (a malformed
+    message, a broken handshake, a connection dropped mid-frame): the servers survive such input, and
+    the operator is told in one line rather than a library's traceback.
+
+    At most ``burst`` lines are printed in each ``window`` seconds of ``clock``; the incidents held back
+    are counted, and the next line printed (or :meth:`close`) says how many. Thread-safe: the servers
+    report from their own threads.
+    """
+
+    def __init__(self, who: str, burst: int = INCIDENT_BURST, window: float = INCIDENT_WINDOW_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if burst < 1 or not window > 0:
+            raise ValueError("an incident log prints at least one line per window of a positive length")
+        self.who, self.burst, self.window, self.clock = who, burst, window, clock
+        self.total = 0  # incidents reported so far
+        self.printed = 0  # lines printed so far
+        self.held_back = 0  # incidents not printed since the last line
+        self._lock = threading.Lock()
+        self._window_start = -math.inf
+        self._in_window = 0
+
+    def report(self, what: str) -> bool:
+        """Print ``<who>: <what>`` (on one line, cut to :data:`INCIDENT_CHARS`) unless this window's
+        lines are used up; True if it was printed."""
+        with self._lock:
+            self.total += 1
+            now = self.clock()
+            if now - self._window_start >= self.window:
+                self._window_start, self._in_window = now, 0
+            if self._in_window >= self.burst:
+                self.held_back += 1
+                return False
+            self._in_window += 1
+            line = one_line(f"{self.who}: {what}")
+            if self.held_back:
+                line += f" (and {self.held_back} more not shown)"
+                self.held_back = 0
+            self.printed += 1
+            say(line)
+            return True
+
+    def close(self) -> None:
+        """Say how many incidents were held back since the last line, if any (at the server's end)."""
+        with self._lock:
+            if self.held_back:
+                say(f"{self.who}: {self.held_back} more incidents from network clients not shown")
+                self.held_back = 0
+
+
+def say(line: str) -> None:
+    """``line`` on stderr; nothing if stderr is gone (a closed pipe): a client's garbage must not turn
+    into an error of the thread that reports it."""
+    with contextlib.suppress(OSError, ValueError):
+        print(line, file=sys.stderr, flush=True)
+
+
+def one_line(text: str, limit: int = INCIDENT_CHARS) -> str:
+    """``text`` on one printable line of at most ``limit`` characters (a client chooses what its
+    garbage says, control characters and all)."""
+    flat = "".join(c if c.isprintable() else " " for c in text)
+    return flat if len(flat) <= limit else flat[: limit - 1] + "…"
+
+
+FOXGLOVE_LOGGER = "foxglove"  # foxglove-sdk's Rust core logs through Python's logging, under this name
+FOXGLOVE_FORMS = (  # what it logs about a client -> lapwrench's words
+    (re.compile(r"Invalid message from (\S+): (.*)", re.DOTALL), "ignored a malformed message from {}: {}"),
+    (re.compile(r"Error receiving from client (\S+): (.*)", re.DOTALL), "dropped the connection of {}: {}"),
+    (re.compile(r"Dropping client (\S+): (.*)", re.DOTALL), "refused a connection from {}: {}"),
+)
+
+
+def foxglove_incident(message: str) -> str:
+    """A line of foxglove-sdk's server log in lapwrench's words (another line: as it is)."""
+    for pattern, form in FOXGLOVE_FORMS:
+        m = pattern.fullmatch(message)
+        if m is not None:
+            return "Foxglove server: " + form.format(*m.groups())
+    return f"Foxglove server: {message}"
+
+
+class FoxgloveLog(logging.Handler):
+    """foxglove-sdk's server log (its warnings and errors) on the ``foxglove`` logger, as
+    :class:`IncidentLog` lines of the newest live server, while at least one runs: a line about a
+    client in lapwrench's words (:func:`foxglove_incident`), any other as foxglove says it.
+
+    A handler on foxglove's own logger, not a change of the process's logging: with no logging set up
+    (the command line), Python's last-resort handler is no longer used for these records, so each is
+    printed once, in lapwrench's words and rate-limited; a logging configuration set up by whoever
+    embeds lapwrench still gets them. One for the process (:data:`FOXGLOVE_LOG`): foxglove's records do
+    not say which server they are about.
+    """
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.logs: list[IncidentLog] = []
+        self._attach_lock = threading.Lock()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        logs = self.logs
+        if logs:
+            logs[-1].report(foxglove_incident(record.getMessage()))
+
+    def attach(self, log: IncidentLog) -> None:
+        """A live server starts: its incidents go to ``log``."""
+        with self._attach_lock:
+            self.logs = [*self.logs, log]
+            logger = logging.getLogger(FOXGLOVE_LOGGER)
+            if self not in logger.handlers:
+                logger.addHandler(self)
+
+    def detach(self, log: IncidentLog) -> None:
+        """A live server stopped; the last one takes the handler off foxglove's logger."""
+        with self._attach_lock:
+            self.logs = [x for x in self.logs if x is not log]
+            if not self.logs:
+                logging.getLogger(FOXGLOVE_LOGGER).removeHandler(self)
+
+
+FOXGLOVE_LOG = FoxgloveLog()
 
 
 def urdf_with_assets(urdf: str) -> tuple[str, dict[str, Path]]:
@@ -48,7 +189,12 @@ def urdf_with_assets(urdf: str) -> tuple[str, dict[str, Path]]:
 
 
 class LiveServer:
-    """foxglove-sdk's WebSocket server on a logging context, with the robot description and its meshes."""
+    """foxglove-sdk's WebSocket server on a logging context, with the robot description and its meshes.
+
+    What its clients do wrong is told on stderr by :attr:`incidents` (one line each, rate-limited),
+    prefixed with its ``who``: ``lapwrench run`` by default (which builds it through
+    :class:`~lapwrench.hardware.log.RunLogger`); the simulated runs set their own (:mod:`.live_sim`).
+    """
 
     def __init__(self, context: Any, address: LiveAddress, urdf: str | None = None) -> None:
         import foxglove
@@ -57,11 +203,14 @@ class LiveServer:
         self.urdf: str | None = None
         if urdf is not None:
             self.urdf, self.assets = urdf_with_assets(urdf)
+        self.incidents = IncidentLog("lapwrench run")
+        FOXGLOVE_LOG.attach(self.incidents)
         try:
             self.server = foxglove.start_server(
                 name="lapwrench", host=address[0], port=address[1], context=context, asset_handler=self._asset
             )
         except RuntimeError as exc:
+            FOXGLOVE_LOG.detach(self.incidents)
             where = f"{address[0]}:{address[1]}"
             raise LiveError(f"cannot serve Foxglove on {where}: {str(exc).removeprefix('FoxgloveError: ')}") from exc
         self.address: LiveAddress = (address[0], self.server.port)
@@ -89,7 +238,11 @@ class LiveServer:
             self.description.log({"data": self.urdf}, log_time=ns)
 
     def stop(self) -> None:
-        self.server.stop()
+        try:
+            self.server.stop()
+        finally:
+            FOXGLOVE_LOG.detach(self.incidents)
+            self.incidents.close()
 
 
 IMAGE_PERIOD_S = 0.2  # camera frames go to the log and the live view at 5 Hz (session time)

@@ -69,7 +69,7 @@ class live_simulation(contextlib.AbstractContextManager["live_simulation"]):  # 
     """Every simulated cycle (decimated, :class:`SimTelemetry`) served live to Foxglove on ``address``
     while the ``with`` block runs: ``demo --foxglove`` and ``ui --foxglove``. The server starts here
     (LiveError, one line, if it cannot: the port taken, the host unknown) and says where it listens on
-    stderr, prefixed with ``who``.
+    stderr, prefixed with ``who``, as are the lines about its misbehaving clients (:class:`.live.IncidentLog`).
 
     ``telemetry`` is the cues whose telemetry the cycle messages carry (:mod:`.telemetry`): the
     caller's :func:`~.telemetry.simulation_layout` of the configuration it runs; by default that of no
@@ -88,6 +88,7 @@ class live_simulation(contextlib.AbstractContextManager["live_simulation"]):  # 
         meta = {"command": who, "robot": robot}
         self.logger = RunLogger(None, meta, model=RobotModel(robot), live=address, telemetry=dict(layout))
         assert self.logger.live is not None
+        self.logger.live.incidents.who = who  # what its clients do wrong is told as this command's
         host, port = self.logger.live.address
         print(f"{who}: live telemetry for Foxglove on ws://{host}:{port}", file=sys.stderr)
         self._observing = observe_cycles(SimTelemetry(self.logger))
