@@ -16,7 +16,7 @@ import pytest
 
 from lapwrench.compiled_tick import CueError, ReadOnlyInputs
 from lapwrench.config import Config
-from lapwrench.controller import Controller
+from lapwrench.controller import Controller, TickResult
 from lapwrench.jit import jit_enabled
 from lapwrench.sensors import (
     ForceTorqueReading,
@@ -88,7 +88,7 @@ class Hostile(Cue):
         return self.values
 
 
-def _tick_with(cue: Hostile):  # type: ignore[no-untyped-def]
+def _tick_with(cue: Hostile) -> tuple[TickResult, list[InputEvent]]:
     ctrl = Controller(cue.cfg, extra_cues=[cue])
     q0 = home_pose(cue.cfg.robot.kind)
     ctrl.reset(q0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from fake_plugins import Spring, install
@@ -40,7 +42,7 @@ FT = ForceTorqueReading(np.array([5.0, 0.0, 0.0]), np.zeros(3))
 FAR = InstrumentObservation(np.array([[600.0, 400.0]]))
 
 
-def _frame(t: float, **kw) -> SensorFrame:
+def _frame(t: float, **kw: Any) -> SensorFrame:
     base = {"ft": FT, "tactile": GRIP, "instruments": InstrumentObservation(FAR.points, t)}
     base.update(kw)
     return SensorFrame(t, **base)

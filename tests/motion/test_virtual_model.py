@@ -11,7 +11,7 @@ from lapwrench.robot.model import RobotModel
 from lapwrench.virtual import DEFAULT_Q0
 
 
-def _damped_step_matrices(ctrl: Controller):
+def _damped_step_matrices(ctrl: Controller) -> tuple[np.ndarray, np.ndarray]:
     """Velocity-update matrices of the damping terms alone, explicit and semi-implicit."""
     kin = ctrl.model.kinematics(DEFAULT_Q0, np.zeros(7))
     from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
