@@ -22,7 +22,7 @@ from helpers import wait_until
 
 from lapwrench.hardware.log.live import INCIDENT_BURST, IncidentLog
 from lapwrench.ui.inputs import UiInputError, checked_number
-from lapwrench.ui.untrusted import UntrustedClients
+from lapwrench.ui.untrusted import PageServer, UntrustedClients
 
 viser = pytest.importorskip("viser")
 websockets = pytest.importorskip("websockets")
@@ -33,10 +33,10 @@ LABEL = "push (N)"
 
 
 class Page:
-    """A viser server with one slider, its hostile clients guarded against."""
+    """The page's viser server with one slider, its hostile clients guarded against (as UiApp builds it)."""
 
     def __init__(self, clock: Any = time.monotonic) -> None:
-        self.server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+        self.server = PageServer(host="127.0.0.1", port=0, verbose=False)
         self.slider = self.server.gui.add_slider(LABEL, 0.0, 30.0, 0.5, 0.0)
         self.untrusted = UntrustedClients(self.server, IncidentLog("lapwrench ui", clock=clock))
         self.port = int(self.server.get_port())
@@ -243,3 +243,21 @@ def test_a_clients_garbage_is_one_line_but_a_failure_of_lapwrench_code_still_sho
     assert [e for e in tracebacks(caplog) if not isinstance(e, UiInputError)] == []
     lines = our_lines(capfd.readouterr().err)
     assert len(lines) == 1 and "could not convert string to float: 'garbage'" in lines[0]
+
+
+def test_a_request_to_share_the_page_on_the_internet_is_refused_with_one_line(
+        page: Page, caplog: pytest.LogCaptureFixture, capfd: pytest.CaptureFixture[str]) -> None:
+    """viser opens a public tunnel (share.viser.studio) for any client's ShareUrlRequest, e.g. a web page in
+    the user's browser that opens a WebSocket to localhost: the page's server refuses it, and says so."""
+    async def ask() -> None:
+        async with websockets.connect(f"ws://127.0.0.1:{page.port}", subprotocols=[PROTOCOL], max_size=None) as ws:
+            await ws.send(msgspec.msgpack.encode({"type": "ShareUrlRequest"}))
+            await asyncio.sleep(0.2)
+
+    asyncio.run(ask())
+    assert wait_until(lambda: page.untrusted.incidents.total == 1, 10)
+    assert page.server.request_share_url() is None  # nothing to share, whoever asks
+    err = capfd.readouterr().err
+    lines = our_lines(err)
+    assert lines[0] == f"{WHO}refused a request to share the page on the internet (lapwrench never shares it)"
+    assert "Traceback" not in err and not tracebacks(caplog)

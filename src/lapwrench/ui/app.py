@@ -30,7 +30,7 @@ from lapwrench.ui.plots import LivePlots, plot_specs
 from lapwrench.ui.runner import RealTimeRunner
 from lapwrench.ui.scene import SceneDrawer, cue_color
 from lapwrench.ui.session import Session
-from lapwrench.ui.untrusted import UntrustedClients
+from lapwrench.ui.untrusted import PageServer, UntrustedClients
 from lapwrench.ui.view import RENDER_NICE, LaparoscopeView, view_size
 
 PAGE_HZ = 20.0  # scene updates per second
@@ -54,10 +54,8 @@ class UiApp:
     """The viser server with the session, the runner, the view and the page's panels."""
 
     def __init__(self, cfg: Config, options: UiOptions | None = None) -> None:
-        import viser
-
         self.options = opts = options or UiOptions()
-        self.server = viser.ViserServer(host=opts.host, port=opts.port, label="lapwrench", verbose=False)
+        self.server = PageServer(host=opts.host, port=opts.port, label="lapwrench", verbose=False)  # never shared
         if opts.port and self.server.get_port() != opts.port:  # viser tries the next ports when one is taken
             self.server.stop()
             raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))

@@ -22,6 +22,12 @@ viser's event loop (:meth:`viser.ViserServer.get_event_loop`). viser's warning a
 wrong length in a client's message is not shown (a warnings filter): the message is refused or
 applied as it is, and a refusal has its line.
 
+A client can also ask viser to share the page: a ``ShareUrlRequest`` (a button of viser's page,
+and any program that reaches the port, a web page in the user's browser included: browsers let any
+site open a WebSocket to localhost) makes viser open a public tunnel through share.viser.studio, so
+that anyone on the internet can reach the page. lapwrench never shares its page: :class:`PageServer`
+refuses the request with one line.
+
 Only refused handshakes and failures of that receive path are told this way (a client that hangs up
 mid-handshake is not told at all), and a failure only when no frame of lapwrench's own code is in its
 traceback: anything else (a bug of ours in a callback, a failure while sending) is left to the
@@ -37,6 +43,8 @@ import warnings
 from pathlib import Path
 from types import FrameType
 from typing import Any
+
+import viser
 
 import lapwrench
 from lapwrench.hardware.log.live import IncidentLog
@@ -144,6 +152,19 @@ class ClientFailures(logging.Filter):
         return False
 
 
+class PageServer(viser.ViserServer):
+    """viser's server for lapwrench's page, which it never shares on the internet: a client's
+    ``ShareUrlRequest`` (module docstring) is refused, one line in :attr:`incidents` (set by
+    :class:`UntrustedClients`), and no tunnel is opened."""
+
+    incidents: IncidentLog | None = None
+
+    def request_share_url(self, verbose: bool = True) -> str | None:
+        if self.incidents is not None:
+            self.incidents.report("refused a request to share the page on the internet (lapwrench never shares it)")
+        return None
+
+
 class UntrustedClients:
     """Installed on a running :class:`viser.ViserServer` (by :class:`~lapwrench.ui.app.UiApp`) until
     :meth:`close`: what its clients do wrong goes to ``incidents``, one line each, rate-limited."""
@@ -151,6 +172,8 @@ class UntrustedClients:
     def __init__(self, server: Any, incidents: IncidentLog | None = None) -> None:
         self.incidents = incidents if incidents is not None else IncidentLog(WHO)
         self.filter = ClientFailures(self.incidents)
+        if isinstance(server, PageServer):
+            server.incidents = self.incidents
         # First among the logger's filters: viser adds its own at its first HTTP request (every viser
         # server of the process adds one, and none is taken off), which drops a refused handshake
         # without a word; ours tells it, in one line.
