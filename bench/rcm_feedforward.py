@@ -6,8 +6,9 @@ of 10-30 N and a torque of up to 1.2 N m (5-30 N, 0.5 N m from home):
 
 - ``ur5_wrist``: the UR5 with its wrist near the singularity (|q5| 0.03-0.15 rad), the rest of its
   home pose moved by 0.2 rad;
-- ``panda_singular``: the Panda at poses where the lateral RCM task is singular (its smallest
-  singular value minimised from random starts, scipy's L-BFGS-B inside the joint limits);
+- ``panda_ill_conditioned``: the Panda at the poses of least lateral manipulability the search finds
+  (the lateral RCM task's smallest singular value minimised from random starts, scipy's L-BFGS-B
+  inside the joint limits: 0.06-0.18 against 0.64 at home, printed; not singular);
 - ``panda_home``: the Panda from its home pose.
 
 Reports each group's largest and median RCM error (mm) off and on, the ratio, and the runs the
@@ -45,19 +46,20 @@ def push(rng: np.random.Generator, lo: float, hi: float) -> np.ndarray:
     return f * rng.uniform(lo, hi) / np.linalg.norm(f)
 
 
-def singular_panda_pose(ctrl: Controller, rng: np.random.Generator) -> np.ndarray:
-    """A Panda pose where the lateral RCM task (p_R 0.8 L down the shaft) is singular."""
-    lim, length = ctrl.model.limits, ctrl.model.length
+def lateral_sigma_min(ctrl: Controller, q: np.ndarray) -> float:
+    """The smallest singular value of the lateral RCM task (p_R 0.8 L down the shaft) at ``q``."""
+    kin = ctrl.model.kinematics(q, np.zeros(q.shape[0]))
+    J = lateral_task(kin.R_E, lateral_rcm_jacobian(kin, kin.p_E + 0.8 * ctrl.model.length * kin.d_z))
+    return float(np.linalg.svd(J, compute_uv=False)[-1])
 
-    def smallest_singular_value(q: np.ndarray) -> float:
-        kin = ctrl.model.kinematics(q, np.zeros(7))
-        J = lateral_task(kin.R_E, lateral_rcm_jacobian(kin, kin.p_E + 0.8 * length * kin.d_z))
-        return float(np.linalg.svd(J, compute_uv=False)[-1])
 
+def ill_conditioned_panda_pose(ctrl: Controller, rng: np.random.Generator) -> np.ndarray:
+    """A Panda pose of least lateral manipulability near a random start (:func:`lateral_sigma_min` minimised)."""
+    lim = ctrl.model.limits
     lo, hi = lim.position_lower + 0.051, lim.position_upper - 0.051
     q0 = np.clip(home_pose("panda") + rng.normal(0.0, 0.7, 7), lo + 0.01, hi - 0.01)
     bounds = list(zip(lo, hi, strict=True))
-    return np.asarray(minimize(smallest_singular_value, q0, method="L-BFGS-B", bounds=bounds).x)
+    return np.asarray(minimize(lambda q: lateral_sigma_min(ctrl, q), q0, method="L-BFGS-B", bounds=bounds).x)
 
 
 def starts(n: int, rng: np.random.Generator) -> dict[str, list[Start]]:
@@ -67,10 +69,13 @@ def starts(n: int, rng: np.random.Generator) -> dict[str, list[Start]]:
         q[4] = rng.uniform(0.03, 0.15) * rng.choice([-1.0, 1.0])
         ur5.append(("ur5", q, push(rng, 10.0, 30.0), rng.uniform(-1.2, 1.2, 3)))
     panda = Controller(config("panda", True))
-    singular = [("panda", singular_panda_pose(panda, rng), push(rng, 10.0, 30.0), rng.uniform(-1.0, 1.0, 3))
-                for _ in range(n)]
+    ill = [("panda", ill_conditioned_panda_pose(panda, rng), push(rng, 10.0, 30.0), rng.uniform(-1.0, 1.0, 3))
+           for _ in range(n)]
+    sigma = [lateral_sigma_min(panda, s[1]) for s in ill]
+    print(f"panda_ill_conditioned: lateral task's smallest singular value {min(sigma):.3f}-{max(sigma):.3f} "
+          f"(home {lateral_sigma_min(panda, home_pose('panda')):.3f})")
     home = [("panda", home_pose("panda"), push(rng, 5.0, 30.0), rng.uniform(-0.5, 0.5, 3)) for _ in range(n)]
-    return {"ur5_wrist": ur5, "panda_singular": singular, "panda_home": home}
+    return {"ur5_wrist": ur5, "panda_ill_conditioned": ill, "panda_home": home}
 
 
 def constant(v: np.ndarray) -> Callable[[float], np.ndarray]:

@@ -164,7 +164,9 @@ def expected_motion(ctrl: Controller, f: Front, r: Readings, stopping: bool, ext
     J_pinv = al.weighted_pseudo_inverse(geo.J_R, Minv, *([kin.d_z] if p.lateral else []))
     F_r = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
     if p.rcm_feedforward:
-        F_r = F_r + rcm_feedforward(kin, Minv, geo.J_R, J_pinv, rg.rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
+        J_lat = rg.lateral_rcm_jacobian(kin, geo.p_R)
+        F_r = F_r + rcm_feedforward(kin, Minv, J_lat, al.weighted_pseudo_inverse(J_lat, Minv, kin.d_z),
+                                    rg.rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
     delta, contacts = grip_gain(r.tactile, p.k_H, p.k_min, p.contact_threshold)
     W_h = (np.r_[interaction_wrench(r.ft_force, r.ft_torque, kin.R_H, delta)] if p.cue_interaction and delta != 0.0
            else np.zeros(6))

@@ -181,8 +181,10 @@ def motion_stage(
     J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
     W_r = np.zeros(6)
     W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
-    if p.rcm_feedforward:
-        W_r[3:] += rcm_feedforward(kin, Minv, geo.J_R, J_pinv, rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
+    if p.rcm_feedforward:  # across the shaft only, whichever form of the task (wrenches/rcm.py)
+        J_lat = geo.J_R if p.lateral else lateral_rcm_jacobian(kin, geo.p_R)
+        J_lat_pinv = J_pinv if p.lateral else weighted_pseudo_inverse(J_lat, Minv, kin.d_z)
+        W_r[3:] += rcm_feedforward(kin, Minv, J_lat, J_lat_pinv, rcm_error_drift(kin, geo.p_R, geo.rcm_velocity))
     delta, contacts = 0.0, 0
     if has_tactile:
         delta, contacts = grip_gain(tactile, p.k_H, p.k_min, p.contact_threshold)

@@ -7,7 +7,7 @@ import numpy as np
 
 from lapwrench.allocation import weighted_pseudo_inverse
 from lapwrench.jit import kernel
-from lapwrench.rcm.geometry import rcm_error_drift
+from lapwrench.rcm.geometry import lateral_rcm_jacobian, rcm_error_drift
 from lapwrench.robot.model import Kinematics, inverse_inertia
 from lapwrench.spatial import Mat, Vec, Wrench, matvec
 from lapwrench.wrenches.base import Cue, TickContext
@@ -23,7 +23,7 @@ def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
 
 
 @kernel
-def rcm_feedforward(kin: Kinematics, Minv: Mat, J_R: Mat, J_pinv: Mat, drift: Vec) -> Vec:
+def rcm_feedforward(kin: Kinematics, Minv: Mat, J_lat: Mat, J_lat_pinv: Mat, drift: Vec) -> Vec:
     """F_ff = -Λ_R (μ - J_R M⁻¹ C θ̇) at p_R: the force that cancels the velocity-product terms of the
     RCM error's acceleration (a departure from eq 2, which has none; ``rcm.feedforward: false`` is the paper's).
 
@@ -34,15 +34,20 @@ def rcm_feedforward(kin: Kinematics, Minv: Mat, J_R: Mat, J_pinv: Mat, drift: Ve
 
     μ the drift :func:`~lapwrench.rcm.geometry.rcm_error_drift`. Without F_ff the RCM error is a
     spring-damper (eq 14) driven by these terms, which grow with θ̇² and with Λ_R near a singularity.
-    Λ_R is taken from eq (4)'s J⁺ = M⁻¹ J_Rᵀ Λ_R as J⁺ᵀ M J⁺ (= Λ_R Λ_R⁻¹ Λ_R), so the lateral
-    task's exact pseudo-inverse carries over: no force along d_z.
+
+    Only the part across the shaft is cancelled, with the lateral task ``J_lat`` = P J_R
+    (:func:`~lapwrench.rcm.geometry.lateral_rcm_jacobian`) and its exact pseudo-inverse ``J_lat_pinv``
+    (eq 4 with the null direction d_z), in either form of the task: e_R ⟂ d_z always, so its
+    acceleration along d_z is set by the geometry, and the printed J_R's Λ_R has an eigenvalue of
+    about 1/|e_R|² there (cancelling it asked for 1e8 N at |e_R| = 10 µm). Λ_R is taken as
+    J⁺ᵀ M J⁺ (= Λ_R Λ_R⁻¹ Λ_R); F_ff ⟂ d_z, so J_Rᵀ F_ff is the same for the printed J_R.
     """
     n = kin.q.shape[0]
     c = np.empty(n)
     for i in range(n):
         c[i] = kin.nle[i] - kin.gravity[i]  # C θ̇
-    mu = drift - matvec(J_R, matvec(Minv, c))
-    return -matvec(J_pinv.T, matvec(kin.M, matvec(J_pinv, mu)))
+    mu = drift - matvec(J_lat, matvec(Minv, c))
+    return -matvec(J_lat_pinv.T, matvec(kin.M, matvec(J_lat_pinv, mu)))
 
 
 class RcmCue(Cue):
@@ -63,7 +68,7 @@ class RcmCue(Cue):
         if self.params.feedforward:
             kin = ctx.kin
             Minv = inverse_inertia(kin.M)
-            lateral = self.cfg.motion.rcm_task == "lateral"
-            J_pinv = weighted_pseudo_inverse(g.J_R, Minv, kin.d_z) if lateral else weighted_pseudo_inverse(g.J_R, Minv)
-            F = F + rcm_feedforward(kin, Minv, g.J_R, J_pinv, rcm_error_drift(kin, g.p_R, g.rcm_velocity))
+            J_lat = lateral_rcm_jacobian(kin, g.p_R)  # across the shaft only, as the tick (rcm_feedforward)
+            J_lat_pinv = weighted_pseudo_inverse(J_lat, Minv, kin.d_z)
+            F = F + rcm_feedforward(kin, Minv, J_lat, J_lat_pinv, rcm_error_drift(kin, g.p_R, g.rcm_velocity))
         return Wrench(np.zeros(3), F, g.p_R)
