@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import os
 import shutil
+import socket
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -385,3 +386,31 @@ def test_a_bad_parameter_is_shown_on_the_page_and_the_simulation_keeps_running(
     assert app.session.time > t0
     assert app.session.cfg.tracking.epsilon2 == eps2
     assert app.runner.error is None
+
+
+def test_a_failed_start_stops_the_server_and_takes_its_client_guard_off(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A page that fails while its panels are built (after the server and the session started) leaves no
+    server running and no filter on websockets' logger (they outlived the failed start before)."""
+    import logging
+
+    from lapwrench.ui import app as app_module
+
+    def broken(*args: Any, **kwargs: Any) -> None:
+        raise RuntimeError("broken panel")
+
+    monkeypatch.setattr(app_module, "LivePlots", broken)
+    guards_before = list(logging.getLogger("websockets.server").filters)
+    started: list[Any] = []
+    real_init = app_module.PageServer.__init__
+
+    def recording_init(self: Any, *args: Any, **kwargs: Any) -> None:
+        real_init(self, *args, **kwargs)
+        started.append(self)
+
+    monkeypatch.setattr(app_module.PageServer, "__init__", recording_init)
+    with pytest.raises(RuntimeError, match="broken panel"):
+        UiApp(config.load(), UiOptions(port=0, view_fps=VIEW_FPS))
+    assert logging.getLogger("websockets.server").filters == guards_before
+    port = int(started[0].get_port())
+    with socket.socket() as s:  # the port is free again: the server stopped
+        s.bind(("127.0.0.1", port))

@@ -66,6 +66,16 @@ class UiApp:
             self.server.stop()
             self.untrusted.close()
             raise
+        try:
+            self._build_page(opts)
+        except BaseException:  # the server, its client guard and the world end with the failed start
+            self.server.stop()
+            self.untrusted.close()
+            self.session.closed.world.close()
+            raise
+
+    def _build_page(self, opts: UiOptions) -> None:
+        """The runner, the scene, the panels and the view (in :meth:`__init__`, after the session)."""
         self.runner = RealTimeRunner(self.session.step, lambda: self.session.time)
         # No shadows and no environment map (image-based lighting): in a browser without a GPU (software
         # WebGL) they cost most of each frame, and a busy browser takes the CPU the simulation needs.

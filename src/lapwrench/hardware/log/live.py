@@ -213,11 +213,18 @@ class LiveServer:
             FOXGLOVE_LOG.detach(self.incidents)
             where = f"{address[0]}:{address[1]}"
             raise LiveError(f"cannot serve Foxglove on {where}: {str(exc).removeprefix('FoxgloveError: ')}") from exc
+        except BaseException:  # anything else (Ctrl-C included): the handler does not outlive the server
+            FOXGLOVE_LOG.detach(self.incidents)
+            raise
         self.address: LiveAddress = (address[0], self.server.port)
-        self.description = (
-            foxglove.Channel(ROBOT_DESCRIPTION_TOPIC, schema=DESCRIPTION_SCHEMA, context=context)
-            if self.urdf is not None else None
-        )
+        try:
+            self.description = (
+                foxglove.Channel(ROBOT_DESCRIPTION_TOPIC, schema=DESCRIPTION_SCHEMA, context=context)
+                if self.urdf is not None else None
+            )
+        except BaseException:
+            self.stop()
+            raise
         self._next_wall = -math.inf
 
     def _asset(self, uri: str) -> bytes | None:
