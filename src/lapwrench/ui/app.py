@@ -14,6 +14,7 @@ What a client sends that viser refuses is told in one line each, rate-limited
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import threading
@@ -60,19 +61,13 @@ class UiApp:
             self.server.stop()
             raise OSError(errno.EADDRINUSE, os.strerror(errno.EADDRINUSE))
         self.untrusted = UntrustedClients(self.server)  # a client's garbage: one line, not a traceback
-        try:
+        with contextlib.ExitStack() as undo:  # a failed start ends what it started, newest first
+            undo.callback(self.untrusted.close)
+            undo.callback(self.server.stop)
             self.session = Session(cfg, seed=opts.seed, detector=opts.detector)
-        except BaseException:
-            self.server.stop()
-            self.untrusted.close()
-            raise
-        try:
+            undo.callback(self.session.closed.world.close)
             self._build_page(opts)
-        except BaseException:  # the server, its client guard and the world end with the failed start
-            self.server.stop()
-            self.untrusted.close()
-            self.session.closed.world.close()
-            raise
+            undo.pop_all()  # started: nothing to undo
 
     def _build_page(self, opts: UiOptions) -> None:
         """The runner, the scene, the panels and the view (in :meth:`__init__`, after the session)."""

@@ -209,13 +209,12 @@ class LiveServer:
             self.server = foxglove.start_server(
                 name="lapwrench", host=address[0], port=address[1], context=context, asset_handler=self._asset
             )
-        except RuntimeError as exc:
+        except BaseException as exc:  # Ctrl-C included: the handler does not outlive a failed start
             FOXGLOVE_LOG.detach(self.incidents)
+            if not isinstance(exc, RuntimeError):
+                raise
             where = f"{address[0]}:{address[1]}"
             raise LiveError(f"cannot serve Foxglove on {where}: {str(exc).removeprefix('FoxgloveError: ')}") from exc
-        except BaseException:  # anything else (Ctrl-C included): the handler does not outlive the server
-            FOXGLOVE_LOG.detach(self.incidents)
-            raise
         self.address: LiveAddress = (address[0], self.server.port)
         try:
             self.description = (
