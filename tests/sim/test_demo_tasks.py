@@ -1,16 +1,29 @@
-"""The demo's tasks: the detector threads per worker, whether frames are drawn beside the loop, and the
-order the workers take the tasks in."""
+"""The demo's tasks: the detector threads per worker, whether frames are drawn beside the loop, the
+order the workers take the tasks in, and a stop signal while the workers start."""
 
 from __future__ import annotations
 
-import pytest
+import gc
+import multiprocessing.util
+import signal
+import threading
+import time
+from pathlib import Path
+from typing import Any
 
+import pytest
+from tqdm import tqdm
+
+from lapwrench.sim.demo import plan_demo
 from lapwrench.sim.demo_tasks import (
     IMAGE_SCENARIOS,
     PRINTED_DAMPING,
     TRACKING_SCENARIOS,
+    DemoInterrupted,
     core_to_spare,
     detector_threads,
+    run_tasks,
+    stop_signals,
     task_cost,
 )
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS
@@ -44,3 +57,46 @@ def test_without_an_image_detector_only_the_rendering_weighs_where_the_report_ke
 @pytest.mark.parametrize(("workers", "cpus", "spare"), [(1, 2, True), (2, 2, False), (1, 1, False), (2, 4, True)])
 def test_frames_are_drawn_beside_the_loop_only_with_a_core_to_spare(workers: int, cpus: int, spare: bool) -> None:
     assert core_to_spare(workers, cpus) is spare
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` still runs (a zombie has ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.slow  # spawns two workers (stopped while they import)
+def test_a_stop_signal_while_the_workers_start_stops_the_demo_once_they_have_started(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str],
+) -> None:
+    """SIGTERM once the first worker is forked, before it has its start data: every worker starts all the
+    same, then the demo stops (DemoInterrupted, its workers terminated) and no worker prints a traceback.
+    A stop raised there used to close the pipe unwritten: that worker died with ``EOFError: Ran out of
+    input``, unknown to the pool."""
+    plan = plan_demo(tmp_path, ["grip", "rcm-disturbance"], video=False, detector="projected", workers=2)
+    spawn = multiprocessing.util.spawnv_passfds
+    workers: list[int] = []
+
+    def spawn_then_stop(path: str, args: list[str], passfds: Any) -> int:
+        pid = spawn(path, args, passfds)
+        if "--multiprocessing-fork" in args:  # a worker (not the resource tracker)
+            workers.append(pid)
+            if len(workers) == 1:  # to this thread (os.kill would let another thread of the process take it)
+                signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+        return pid
+
+    monkeypatch.setattr(multiprocessing.util, "spawnv_passfds", spawn_then_stop)
+    with stop_signals() as signals, pytest.raises(DemoInterrupted):
+        run_tasks(plan, list(plan.scenarios), tqdm(total=1.0, disable=True))
+    monkeypatch.undo()
+    assert signals.signum == signal.SIGTERM
+    assert len(workers) == plan.workers  # both started before the stop
+    gc.collect()  # a start cut short closes its worker's pipe once collected
+    for _ in range(600):  # a worker cut short ends by itself, with its traceback
+        if not any(_running(pid) for pid in workers):
+            break
+        time.sleep(0.1)
+    assert not any(_running(pid) for pid in workers)
+    assert "Traceback" not in capfd.readouterr().err

@@ -39,8 +39,7 @@ from types import FrameType
 from typing import Any
 
 from lapwrench.hardware.devices import CliError
-
-STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+from lapwrench.spawn import STOP_SIGNALS
 
 
 def _error_exit(exc: Exception) -> int:

@@ -23,7 +23,7 @@ from lapwrench.sim.loop import SafetyStopError
 from lapwrench.sim.results import ScenarioOptions, ScenarioResult
 from lapwrench.sim.scenarios import SCENARIOS, SIM_SECONDS, needle_search
 from lapwrench.sim.world import SimulationUnstableError
-from lapwrench.spawn import ensure_resource_tracker, quietly, sigint_blocked
+from lapwrench.spawn import STOP_SIGNALS, ensure_resource_tracker, quietly, starting_children
 
 TRACKING_SCENARIOS = ("needle-search", "workflow")
 
@@ -51,9 +51,6 @@ class DemoPlan:
 
 class DemoError(RuntimeError):
     """A bad demo input, reported before any simulation starts."""
-
-
-STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class DemoInterrupted(KeyboardInterrupt):
@@ -236,7 +233,7 @@ def _collect(
 ) -> dict[str, ScenarioResult | str]:
     """Submit the tasks costliest first (:func:`task_cost`) and gather their results, feeding the progress bar."""
     order = sorted(names, key=lambda n: -task_cost(n, plan.detector))
-    with sigint_blocked():  # the workers start on the first submits
+    with starting_children():  # the workers start on the first submits: a stop signal waits for their starts
         names_of = {pool.submit(_task, n, plan): n for n in order}
     pending = set(names_of)
     bar.set_postfix_str(f"{plan.workers} workers")
