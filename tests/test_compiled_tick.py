@@ -122,10 +122,16 @@ def test_a_non_finite_plugin_output_is_dropped_for_the_tick_and_reported(cfg: Co
     [(np.zeros(6), None, (1.0,), "not a Wrench"),
      (Wrench(np.zeros(2), np.zeros(3), np.zeros(3)), None, (1.0,), "3-vectors"),
      (Wrench(np.zeros(3), ["a", "b", "c"], np.zeros(3)), None, (1.0,), "3-vectors"),  # type: ignore[arg-type]
+     (Wrench(np.zeros(3), ["1", "2", "3"], np.zeros(3)), None, (1.0,), "3-vectors"),  # type: ignore[arg-type]
+     (Wrench(np.array([True, False, True]), np.zeros(3), np.zeros(3)), None, (1.0,), "3-vectors"),
      (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), np.eye(3), (1.0,), "6 x 6"),
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), np.full((6, 6), "1"), (1.0,), "6 x 6"),
      (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, (1.0, 2.0), "telemetry values"),
-     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, ("x",), "numbers")],
-    ids=["array", "short-moment", "text-force", "small-damping", "telemetry-count", "telemetry-text"],
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, ("x",), "numbers"),
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, ("1.5",), "numbers"),
+     (Wrench(np.zeros(3), np.zeros(3), np.zeros(3)), None, (10**400,), "numbers")],
+    ids=["array", "short-moment", "text-force", "numeric-text-force", "bool-moment", "small-damping", "text-damping",
+         "telemetry-count", "telemetry-text", "telemetry-numeric-text", "telemetry-huge-int"],
 )
 def test_a_malformed_plugin_output_is_a_cue_error(cfg: Config, value: object, damping: object, telemetry: object,
                                                   words: str) -> None:

@@ -24,7 +24,7 @@ from typing import NamedTuple, TypeVar
 import numpy as np
 
 from lapwrench.allocation import nullspace_wrench
-from lapwrench.inputs import Reading
+from lapwrench.inputs import Reading, real_array
 from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import MeasuredFeedback
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState
@@ -337,13 +337,11 @@ class ReadOnlyInputs:
 
 
 def _vec3(x: object) -> Vec | None:
+    """``x`` as a float64 3-vector if it holds three real numbers (not text, booleans or objects), else None."""
     if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (3,):
         return x  # the common case, checked cheaply
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
-    return a if a.shape == (3,) else None
+    a = real_array(x)
+    return a if a is not None and a.shape == (3,) else None
 
 
 def _checked_wrench(cue: Cue, w: object, p_G: Vec, faults: list[str]) -> Wrench:
@@ -362,12 +360,10 @@ def _checked_wrench(cue: Cue, w: object, p_G: Vec, faults: list[str]) -> Wrench:
 
 
 def _checked_damping(cue: Cue, D: object, faults: list[str]) -> Mat:
-    try:
-        a = np.asarray(D, dtype=np.float64)
-    except (TypeError, ValueError):
-        a = np.zeros(0)
-    if a.shape != (6, 6):
-        raise CueError(f"cue {cue.name!r}: damping_matrix must be 6 x 6, got shape {a.shape}")
+    a = real_array(D)
+    if a is None or a.shape != (6, 6):
+        what = "not real numbers" if a is None else f"shape {a.shape}"
+        raise CueError(f"cue {cue.name!r}: damping_matrix must be 6 x 6 real numbers, got {what}")
     if not np.isfinite(a).all():
         faults.append(f"cue {cue.name!r}: non-finite damping matrix; dropped this tick")
         return np.zeros((6, 6))
@@ -379,9 +375,19 @@ def _checked_damping(cue: Cue, D: object, faults: list[str]) -> Mat:
     return a
 
 
+def _number(x: object) -> float:
+    """``x`` as a float if it is a real number (text, bytes and ints beyond a float's range are not)."""
+    if isinstance(x, str | bytes | bytearray):
+        raise TypeError(f"{type(x).__name__} {x!r:.40}")
+    try:
+        return float(x)  # type: ignore[arg-type]
+    except OverflowError as exc:
+        raise ValueError(f"{exc}") from exc
+
+
 def _checked_telemetry(cue: Cue, values: object) -> tuple[float, ...]:
     try:
-        out = tuple(map(float, values))  # type: ignore[call-overload]
+        out = tuple(map(_number, values))  # type: ignore[call-overload]
     except (TypeError, ValueError) as exc:
         raise CueError(f"cue {cue.name!r}: telemetry must be numbers ({exc})") from exc
     if len(out) != len(cue.telemetry_fields):
