@@ -168,3 +168,21 @@ def test_to_dict_is_plain_yaml_data_that_reads_back() -> None:
     assert yaml.safe_load(yaml.safe_dump(d)) == d
     assert json.loads(json.dumps(d)) == d
     assert from_dict(d) == cfg
+
+
+@pytest.mark.parametrize("header", ["AA55\n", "AA55\r\n", "\nAA55"])
+def test_a_tactile_header_with_a_line_break_is_refused(header: str) -> None:
+    """``$`` also matched before a final newline: "AA55\\n" was taken (and written back by dump)."""
+    with pytest.raises(ConfigError, match=r"'tactile\.header' must be 1 to 8 bytes"):
+        from_dict({"tactile": {"header": header}})
+
+
+@pytest.mark.parametrize("name", ["a\nb.yaml", "a\rb.yaml", "a\x1b[2Jb.yaml"])
+def test_a_config_file_name_with_control_characters_stays_one_line(tmp_path: Path, name: str) -> None:
+    """The name is quoted in every message: a line break (or a terminal escape) in it must not split it."""
+    with pytest.raises(ConfigError, match="config file not found") as err:
+        load(tmp_path / name)
+    assert "\n" not in str(err.value) and "\r" not in str(err.value) and "\x1b" not in str(err.value)
+    with pytest.raises(ConfigError, match=r"line 1: unknown config key 'nope'") as err:
+        load(write_file(tmp_path, "nope: 1\n", name))
+    assert "\n" not in str(err.value) and "\r" not in str(err.value) and "\x1b" not in str(err.value)

@@ -188,3 +188,27 @@ def test_the_checks_between_keys_leave_the_paper_the_studies_and_the_tests_room(
     from_dict({"robot": {"control_rate_hz": 1000}, "motion": {"stop_time": 0.005}})  # 5 ticks
     from_dict({"scope": {"lambda0": 0.9}, "envelope": {"depth_min": 0.028}})  # starts at 29 mm
     from_dict({"motion": {"integrator": "explicit"}})
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ({"rcm": {"kp": 300.0}}, r"unknown config key 'rcm\.kp' \(did you mean 'Kp'\?\); known keys here"),
+        ({"RCM": {}}, r"unknown config key 'RCM' \(did you mean 'rcm'\?\)"),
+        ({"trackng": {}}, r"unknown config key 'trackng' \(did you mean 'tracking'\?\)"),
+        ({"viscous": {"kt": 1.0}}, r"unknown config key 'viscous\.kt' \(did you mean 'k_t'\?\)"),
+        ({"cues": {"keep_out": {"radus": 0.03}}}, r"'cues\.keep_out\.radus' \(did you mean 'radius'\?\)"),
+    ],
+)
+def test_a_mistyped_key_is_refused_with_the_key_it_resembles(data: dict, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        from_dict(data)
+
+
+def test_a_key_like_no_other_gets_no_suggestion() -> None:
+    with pytest.raises(ConfigError) as err:
+        from_dict({"rcm": {"x" * 1_000_000: 1}})
+    assert "did you mean" not in str(err.value) and len(str(err.value)) < 300
+    with pytest.raises(ConfigError) as err:
+        from_dict({"nope": {}})  # 'scope' is not what it meant
+    assert "did you mean" not in str(err.value)

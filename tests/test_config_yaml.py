@@ -93,3 +93,51 @@ def test_files_that_are_not_readable_text(tmp_path: Path, monkeypatch: pytest.Mo
     monkeypatch.setattr(Path, "open", refuse)  # chmod does not stop root, which CI may be
     with pytest.raises(ConfigError, match=r"locked\.yaml cannot be read: Permission denied"):
         load(locked)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("rcm: {feedforward: !!bool maybe}\n", r"line 1: YAML value 'maybe' is not a valid !!bool"),  # was KeyError
+        ("rcm:\n  feedforward: !!bool ''\n", r"line 2: YAML value '' is not a valid !!bool"),
+        ("!!bool maybe: 1\n", r"line 1: YAML value 'maybe' is not a valid !!bool"),  # a key
+        ("rcm: {Kp: !!int ''}\n", r"line 1: YAML value '' is not a valid !!int"),  # was IndexError
+        ("rcm: {Kp: !!int '+'}\n", r"line 1: YAML value '\+' is not a valid !!int"),
+        ("rcm: {Kp: !!float '_'}\n", r"line 1: YAML value '_' is not a valid !!float"),
+        ("rcm:\n  Kd: 20.0\n  Kp: !!float abc\n", r"line 3: YAML value 'abc' is not a valid !!float"),
+    ],
+)
+def test_a_value_its_explicit_tag_cannot_read_is_one_error_with_its_line(tmp_path: Path, text: str, match: str) -> None:
+    """PyYAML's constructors raise KeyError / IndexError on these, which escaped as a traceback."""
+    with pytest.raises(ConfigError, match=r"c\.yaml " + match) as err:
+        load(write_file(tmp_path, text))
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        # YAML 1.1 (PyYAML) reads these as 8, 512, 90 and 300.0: silently not what was written
+        ("interaction: {k_min: 010}\n", r"line 1: '010' has a leading zero"),
+        ("robot:\n  control_rate_hz: 01000\n", r"line 2: '01000' has a leading zero"),
+        ("interaction: {k_min: 1:30}\n", r"line 1: '1:30' is a base-60 number"),
+        ("rcm: {Kp: 5:00.0}\n", r"line 1: '5:00.0' is a base-60 number"),
+        ("rcm: {Kp: !!int 0_10}\n", r"line 1: '0_10' has a leading zero"),
+    ],
+)
+def test_numbers_yaml_1_1_reads_as_octal_or_base_60_are_refused(tmp_path: Path, text: str, match: str) -> None:
+    with pytest.raises(ConfigError, match=r"c\.yaml " + match) as err:
+        load(write_file(tmp_path, text))
+    assert "\n" not in str(err.value)
+
+
+def test_unambiguous_integer_forms_still_load(tmp_path: Path) -> None:
+    cfg = load(write_file(tmp_path, "interaction: {k_min: 0x0A, contact_threshold: 0}\nscope: {grip_mass: -0}\n"))
+    assert (cfg.interaction.k_min, cfg.interaction.contact_threshold, cfg.scope.grip_mass) == (10, 0, 0)
+    assert load(write_file(tmp_path, "interaction: {k_min: 7, force_range: 0200.5}\n")).interaction.force_range == 200.5
+
+
+def test_a_bad_list_element_is_named_with_its_own_line(tmp_path: Path) -> None:
+    text = "scope:\n  grip_com:\n    - 0.0\n    - 0.0\n    - 5.0\n"
+    with pytest.raises(ConfigError, match=r"c\.yaml line 5: config key 'scope\.grip_com\[2\]' must lie in"):
+        load(write_file(tmp_path, text))

@@ -212,7 +212,7 @@ class InputsConfig:
     max_instruments: int = ranged("[1, 64]", 8, "more detections in one frame are a detector fault: none used")
 
 
-_HEX = re.compile(r"^[0-9A-Fa-f]{2}(?: ?[0-9A-Fa-f]{2}){0,7}$")  # what bytes.fromhex reads, 1-8 bytes
+_HEX = re.compile(r"[0-9A-Fa-f]{2}(?: ?[0-9A-Fa-f]{2}){0,7}")  # what bytes.fromhex reads, 1-8 bytes
 
 
 @dataclass(frozen=True)
@@ -229,7 +229,7 @@ class TactileConfig:
     checksum_includes_header: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.header, str) or _HEX.match(self.header) is None:
+        if not isinstance(self.header, str) or _HEX.fullmatch(self.header) is None:  # match's $ allows a "\n"
             raise ConfigError(
                 "config key 'tactile.header' must be 1 to 8 bytes as hex text such as 'AA55', "
                 f"got {short(self.header)}",
@@ -327,7 +327,8 @@ def _resolve(path: str | Path) -> Path:
     if not exists and str(path) in presets():
         return Path(str(resources.files("lapwrench").joinpath(f"data/presets/{path}.yaml")))
     if not exists:
-        raise ConfigError(f"config file not found: {config_yaml.cut(str(path), 100)} (presets: {', '.join(presets())})")
+        shown = config_yaml.printable(str(path))
+        raise ConfigError(f"config file not found: {shown} (presets: {', '.join(presets())})")
     return p
 
 
@@ -340,7 +341,7 @@ def load(path: str | Path | None = None) -> Config:
     if path is None:
         p, source = Path(str(resources.files("lapwrench").joinpath("data/default.yaml"))), "default.yaml"
     else:
-        p, source = _resolve(path), config_yaml.cut(str(path), 100)
+        p, source = _resolve(path), config_yaml.printable(str(path))  # quoted in every message: one line
     try:
         text = config_yaml.read_text(p, source)
     except config_yaml.YamlConfigError as exc:

@@ -15,6 +15,7 @@ inside the envelope (:func:`check_depths`) and the RCM gains against the control
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import re
 import typing
@@ -123,6 +124,13 @@ def _numbers(key: str, value: Any, args: tuple[Any, ...], bounds: Range | None) 
     return tuple(check_value(f"{key}[{i}]", v, t, bounds) for i, (v, t) in enumerate(zip(value, kinds, strict=True)))
 
 
+def suggestion(key: Any, known: typing.Iterable[str]) -> str:
+    """`` (did you mean 'Kp'?)`` for a mistyped ``key`` close to one of ``known`` (case ignored), else ""."""
+    by_lower = {k.lower(): k for k in known}
+    close = difflib.get_close_matches(str(key)[:100].lower(), list(by_lower), n=1, cutoff=0.75)
+    return f" (did you mean {by_lower[close[0]]!r}?)" if close else ""
+
+
 def build(cls: type, data: Any, prefix: str) -> Any:
     if not isinstance(data, dict):
         raise ConfigError(
@@ -133,7 +141,8 @@ def build(cls: type, data: Any, prefix: str) -> Any:
     for key in data:
         if key not in fields:
             where = f"{prefix}.{key}" if prefix else str(key)
-            raise ConfigError(f"unknown config key {short(where)}; known keys here: {sorted(fields)}", where)
+            raise ConfigError(f"unknown config key {short(where)}{suggestion(key, fields)}; known keys here: "
+                              f"{sorted(fields)}", where)
     kwargs = {}
     for name, f in fields.items():
         key = f"{prefix}.{name}" if prefix else name

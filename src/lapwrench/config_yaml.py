@@ -7,6 +7,10 @@ else YAML can express before any of it is expanded or constructed:
 * text that is not UTF-8;
 * anchors and aliases (``&a`` / ``*a``): an alias bomb of a few hundred bytes expands to gigabytes;
 * explicit tags other than the core ones, merge keys (``<<``), timestamps (read as plain text);
+* numbers YAML 1.1 reads otherwise than they are written: ``010`` (octal 8) and ``1:30`` (base 60: 90),
+  where YAML 1.2 and every reader of a config mean 10 and a time (:func:`_construct_int`);
+* a value its explicit core tag cannot hold (``!!bool maybe``, ``!!int ''``): PyYAML's constructors raise
+  KeyError or IndexError there;
 * nesting deeper than :data:`MAX_DEPTH`, more than :data:`MAX_NODES` nodes, numbers longer than
   :data:`MAX_NUMBER_CHARS` characters (Python's int() of a huge literal is slow or raises);
 * a key that is not a plain scalar, and a key given twice in one mapping (YAML would keep the
@@ -62,6 +66,14 @@ def cut(text: str, limit: int = 300) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
+def printable(text: str, limit: int = 100) -> str:
+    """``text`` (a file's name) for an error message: characters that are not printable (a line break, a
+    terminal escape, an undecodable byte) written as escapes, then cut to ``limit`` (:func:`cut`)."""
+    shown = "".join(c if c.isprintable() else c.encode("unicode_escape", "backslashreplace").decode("ascii")
+                    for c in text[: limit + 1])
+    return cut(shown, limit)
+
+
 def read_text(path: Path, source: str) -> str:
     """The UTF-8 text of the config file at ``path``, refusing anything that is not a small text file."""
     try:
@@ -88,7 +100,8 @@ def _line(node_or_event: Any) -> int:
 
 
 class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses anchors, aliases, odd tags, deep nesting and overlong numbers as it composes."""
+    """SafeLoader that refuses anchors, aliases, odd tags, deep nesting and overlong numbers as it composes,
+    and names the line of any value it cannot construct."""
 
     def __init__(self, stream: str) -> None:
         super().__init__(stream)
@@ -120,6 +133,43 @@ class _StrictLoader(yaml.SafeLoader):
         finally:
             self._depth -= isinstance(event, CollectionStartEvent)
 
+    def construct_object(self, node: Node, deep: bool = False) -> Any:
+        """The node's value; a constructor's own error (``!!bool maybe`` is a KeyError, ``!!int ''`` an
+        IndexError in PyYAML) becomes a :class:`YamlConfigError` naming the node's line."""
+        try:
+            return super().construct_object(node, deep)
+        except YamlConfigError:
+            raise
+        except (ArithmeticError, LookupError, TypeError, ValueError) as exc:
+            kind, value = str(node.tag).removeprefix(_CORE), short(node.value)
+            raise YamlConfigError(f"line {_line(node)}: YAML value {value} is not a valid !!{kind}") from exc
+
+
+def _construct_int(loader: _StrictLoader, node: ScalarNode) -> int:
+    """An integer as YAML 1.2 and a reader see it: refuses what YAML 1.1 would read otherwise (``010`` is 8
+    there, ``1:30`` is 90); hexadecimal (``0x``) and binary (``0b``) are read as in both."""
+    text = str(loader.construct_scalar(node))
+    digits = text.replace("_", "").lstrip("+-")
+    if ":" in digits:
+        raise YamlConfigError(f"line {_line(node)}: {short(text)} {_SEXAGESIMAL}")
+    if len(digits) > 1 and digits[0] == "0" and digits[1].isdigit():
+        raise YamlConfigError(f"line {_line(node)}: {short(text)} has a leading zero: YAML 1.1 reads it as an "
+                              "octal number; write the number without it")
+    return int(yaml.SafeLoader.construct_yaml_int(loader, node))
+
+
+def _construct_float(loader: _StrictLoader, node: ScalarNode) -> float:
+    """A float, refusing YAML 1.1's base-60 form (``5:00.0`` is 300.0 there)."""
+    text = str(loader.construct_scalar(node))
+    if ":" in text:
+        raise YamlConfigError(f"line {_line(node)}: {short(text)} {_SEXAGESIMAL}")
+    return float(yaml.SafeLoader.construct_yaml_float(loader, node))
+
+
+_SEXAGESIMAL = "is a base-60 number in YAML 1.1 (1:30 reads as 90); write the number in decimal, or quote a text"
+_StrictLoader.add_constructor(_CORE + "int", _construct_int)
+_StrictLoader.add_constructor(_CORE + "float", _construct_float)
+
 
 # timestamps stay plain strings (a config has none; "2001-02-30" would raise ValueError in datetime),
 # and "<<" / "=" are ordinary keys (refused later as unknown) instead of merge / value keys
@@ -137,6 +187,7 @@ def _check_keys(loader: _StrictLoader, node: Node, path: str, lines: dict[str, i
     """Refuse non-scalar and duplicate keys; record the line of every key path in ``lines``."""
     if isinstance(node, SequenceNode):
         for i, item in enumerate(node.value):
+            lines.setdefault(f"{path}[{i}]", _line(item))  # an element's own line ("scope.grip_com[2]")
             _check_keys(loader, item, f"{path}[{i}]", lines)
         return
     if not isinstance(node, MappingNode):
