@@ -14,7 +14,10 @@ from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, Superviso
 from lapwrench.safety.supervisor import SafetySupervisor
 from lapwrench.virtual import DEFAULT_Q0
 
-POSITIVE = ("check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "cycle_budget", "rest_velocity")
+POSITIVE = (
+    "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "max_joint_step", "cycle_budget",
+    "rest_velocity",
+)
 
 
 def test_the_defaults_are_the_shipped_yaml_sections() -> None:

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from lapwrench.config import load
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
@@ -286,3 +289,156 @@ def test_a_braking_controller_is_followed_to_rest_then_held_with_an_alarm(limits
     assert s.alarm and s.alarm_reason.startswith("rcm_infeasible")
     assert any(e.kind == "rcm_infeasible" and "braking" in e.message for e in s.events)
     assert_stopped_at_rest_inside_limits(s, q, cmds, limits)
+
+
+# -- every command accepted is one the stop can end inside the limits ---------------------------------
+def sent_inside_the_limits(cmds: list[np.ndarray], limits: JointLimits, q_start: np.ndarray) -> None:
+    """The stream the robot received, differentiated from rest at ``q_start`` as libfranka does, breaks
+    no position (beyond the supervisor's tolerance), velocity, acceleration or jerk limit."""
+    q = np.array(cmds)
+    assert np.all(q <= limits.position_upper + 1e-6) and np.all(q >= limits.position_lower - 1e-6), (
+        np.max(q - limits.position_upper), np.max(limits.position_lower - q)
+    )
+    usage = limit_usage(q, DT, limits, q_start)
+    assert max(usage["velocity"], usage["acceleration"], usage["jerk"]) <= 1.0 + 1e-9, usage
+
+
+def hostile_step(q: np.ndarray, v: np.ndarray, a: np.ndarray, a_want: np.ndarray, limits: JointLimits,
+                 fraction: float = 0.9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One command of a controller inside ``fraction`` of the velocity/acceleration/jerk limits that knows
+    nothing of the position limits: acceleration ``a_want`` reached at the jerk limit."""
+    lim = limits.scaled(fraction)
+    a = np.clip(np.clip(a_want, -lim.acceleration, lim.acceleration), a - lim.jerk * DT, a + lim.jerk * DT)
+    v_new = np.clip(v + a * DT, -lim.velocity, lim.velocity)
+    a = (v_new - v) / DT
+    return q + v_new * DT, v_new, a
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+@pytest.mark.parametrize("joint", range(7))
+def test_a_controller_running_into_a_joint_limit_is_stopped_before_it(
+    limits: JointLimits, joint: int, direction: float
+) -> None:
+    """A reference at 90 % of the speed limit heading for a joint limit without braking: every command is
+    inside the limits until the last, but a stop begun there needs ~0.15 rad. The supervisor refuses the
+    first command it could not stop from, so its stop ends inside the position limit (before: 0.15 rad past)."""
+    s = started(limits)
+    q, v, a = DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7)
+    cmds: list[np.ndarray] = []
+    for _ in range(5000):
+        q, v, a = hostile_step(q, v, a, 50.0 * (direction * 0.9 * limits.velocity * np.eye(7)[joint] - v), limits)
+        cmds.append(s.filter(0.0, q))
+        if s.alarm:
+            break
+    assert s.alarm and s.alarm_reason.startswith("command_stop_position"), s.alarm_reason
+    run_to_rest(s, q, cmds)
+    sent_inside_the_limits(cmds, limits, DEFAULT_Q0)
+
+
+@pytest.mark.parametrize("joint", range(7))
+def test_full_acceleration_up_to_full_speed_is_refused_before_its_stop_could_overspeed(
+    limits: JointLimits, joint: int
+) -> None:
+    """Accelerating at the acceleration limit right up to the velocity limit: each command is inside both,
+    but a stop from the last must first ramp the acceleration out, and the speed grows meanwhile (up to
+    a²/2j, +0.8 % on joint 1 before). The supervisor refuses the command its stop could not keep under
+    the velocity limit."""
+    s = started(limits)
+    q, v, a = DEFAULT_Q0.copy(), np.zeros(7), np.zeros(7)
+    push = np.eye(7)[joint] * limits.acceleration
+    cmds: list[np.ndarray] = []
+    for _ in range(2000):
+        q, v, a = hostile_step(q, v, a, push, limits, fraction=0.9995)
+        cmds.append(s.filter(0.0, q))
+        if s.alarm:
+            break
+    assert s.alarm and s.alarm_reason.startswith("command_stop_velocity"), s.alarm_reason
+    run_to_rest(s, q, cmds)
+    sent_inside_the_limits(cmds, limits, DEFAULT_Q0)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@given(
+    start=st.lists(st.floats(0.0, 1.0), min_size=7, max_size=7),
+    segments=st.lists(
+        st.tuples(st.integers(1, 150), st.lists(st.floats(-1.0, 1.0), min_size=7, max_size=7)), min_size=1, max_size=8
+    ),
+    fault=st.sampled_from(["stop", "alarm", "measured_rcm"]),
+)
+def test_any_stream_of_commands_and_any_stop_reach_the_robot_inside_every_limit(
+    start: list[float], segments: list[tuple[int, list[float]]], fault: str
+) -> None:
+    """Property: from any start pose inside the limits, a controller at the hard velocity/acceleration
+    limits with random jerks and no care for the position limits, then a stop (asked, alarm, or a measured
+    fault), the commands the robot receives break no limit and end at rest."""
+    limits = RobotModel("panda").limits
+    q0 = limits.position_lower + np.array(start) * (limits.position_upper - limits.position_lower)
+    s = SafetySupervisor(limits, DT, SupervisorConfig(max_consecutive_misses=0))
+    s.start(q0)
+    q, v, a = q0.copy(), np.zeros(7), np.zeros(7)
+    cmds: list[np.ndarray] = []
+    for n, jerk in segments:
+        for _ in range(n):
+            q, v, a = hostile_step(q, v, a, a + np.array(jerk) * limits.jerk * DT, limits, fraction=1.0)
+            cmds.append(s.filter(0.0, q))
+    if fault == "stop":
+        s.stop(0.0)
+    elif fault == "alarm":
+        s.raise_alarm(0.0, "test", "a fault")
+    cmds.append(s.filter(0.0, q, rcm_error=1.0 if fault == "measured_rcm" else None))
+    run_to_rest(s, q, cmds)
+    sent_inside_the_limits(cmds, limits, q0)
+    _q, v_end, a_end = s.command_state
+    assert np.all(v_end == 0) and np.all(a_end == 0)
+
+
+# -- a resume after a hold ---------------------------------------------------------------------------
+def held_after_an_alarm(limits: JointLimits) -> tuple[SafetySupervisor, list[np.ndarray]]:
+    """A moving arm held by a measured RCM alarm: the supervisor at rest, its commands so far."""
+    s, q, cmds = moving(limits)
+    cmds.append(s.filter(0.3, q, rcm_error=0.05))
+    run_to_rest(s, q, cmds)
+    return s, cmds
+
+
+def test_a_resume_after_a_hold_does_not_jump(limits: JointLimits) -> None:
+    """The robot holds the last command; the controller restarts at the *measured* pose, a tracking error
+    away (0.3 mrad here). Before, the supervisor restarted from the measured pose too and the robot's
+    reference jumped by the tracking error in one cycle (300 rad/s^2). Now the offset is phased out."""
+    s, cmds = held_after_an_alarm(limits)
+    held = cmds[-1]
+    measured = held + 3e-4 * np.array([1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
+    s.start(measured, time=1.0)
+    assert not s.alarm and s.state is SupervisorState.RUNNING and s.resume_cycles > 0
+    shaper = ReferenceShaper(limits, DT, 0.9, 0.05)
+    st_ref = ReferenceState(measured.copy(), np.zeros(7), np.zeros(7))
+    out, refs = [], []
+    for k in range(s.resume_cycles + 200):
+        st_ref = shaper.step(st_ref, np.full(7, 0.3))
+        refs.append(st_ref.q)
+        out.append(s.filter(1.0 + k * DT, st_ref.q))
+        assert not s.alarm, s.alarm_reason
+    assert np.array_equal(out[-1], st_ref.q)  # once phased out, the controller's commands pass unchanged
+    sent_inside_the_limits(cmds + out, limits, DEFAULT_Q0)
+    # the first command continues from the held one, by the controller's own first step
+    assert np.allclose(out[0] - held, refs[0] - measured, rtol=0, atol=1e-7)
+
+
+def test_a_start_far_from_the_held_reference_starts_afresh(limits: JointLimits) -> None:
+    """An offset no tracking error explains (the arm was moved): no phase-out, an event says so."""
+    s, cmds = held_after_an_alarm(limits)
+    far = cmds[-1] + 0.05
+    s.start(far, time=1.0)
+    assert s.resume_cycles == 0 and any(e.kind == "start_afresh" for e in s.events)
+    assert np.array_equal(s.filter(1.0, far), far)
+
+
+@pytest.mark.parametrize("bad", [DEFAULT_Q0 + 0j, ["a"] * 7, np.array([object()] * 7)])
+def test_a_command_that_is_not_real_numbers_is_refused_without_a_warning(limits: JointLimits, bad: object) -> None:
+    """A complex command was cast to its real part with a ComplexWarning (an exception where warnings are
+    errors), text raised; both are a refused command now."""
+    s = started(limits)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = s.filter(0.0, bad)
+    assert np.array_equal(out, DEFAULT_Q0) and s.alarm_reason.startswith("command_invalid")

@@ -8,6 +8,8 @@ what they remember between cycles, and what a malformed measurement does.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -118,12 +120,13 @@ def test_a_measured_alarm_is_logged_once_while_the_excursion_lasts(limits: Joint
 def test_a_near_joint_limit_is_logged_once_per_approach(limits: JointLimits) -> None:
     s = started(limits, joint_warn_margin=0.05, joint_stop_margin=0.01)
     near, far = DEFAULT_Q0.copy(), DEFAULT_Q0.copy()
-    near[2] = limits.position_lower[2] + 0.03
+    near[2] = limits.position_lower[2] + 0.035
+    far[2] = limits.position_lower[2] + 0.052  # out of the warning band, a plausible step (< max_joint_step) away
     for q in (near, near, near, far, near):
         s.filter(0.0, DEFAULT_Q0, q_measured=q)
     warnings = [e for e in s.events if e.kind == "joint_limit_near"]
     assert len(warnings) == 2 and not s.alarm  # the second after the joint moved away and back
-    assert warnings[0].message == "joint 3 measured 0.0300 rad from its limit"
+    assert warnings[0].message == "joint 3 measured 0.0350 rad from its limit"
 
 
 def test_a_measured_joint_past_its_limit_stops_naming_the_joint(limits: JointLimits) -> None:
@@ -239,3 +242,138 @@ def test_the_controller_stop_timer_starts_afresh_with_each_run(limits: JointLimi
     q, v = _ramp(s, q)
     s.filter(5.2, q + DT * v, controller_stopping=True)
     assert not s.alarm and s.state is SupervisorState.RUNNING  # a timer left from the first run would hold
+
+
+# -- timed watches do not trust the caller's clock ---------------------------------------------------
+CLOCKS = {
+    "frozen": lambda k: 1.0,
+    "backwards": lambda k: 10.0 - k * DT,
+    "nan": lambda k: float("nan"),
+}
+
+
+@pytest.mark.parametrize("clock", sorted(CLOCKS))
+def test_a_residual_force_that_stays_holds_after_its_time_whatever_the_clock(limits: JointLimits, clock: str) -> None:
+    """The time over the bound counted the session time alone: a stale, backward or NaN clock never held
+    a 30 N load on the wall. The cycles count too now (one filter call per control period)."""
+    s = started(limits)
+    for k in range(51):
+        assert not s.alarm
+        s.filter(CLOCKS[clock](k), DEFAULT_Q0, residual=np.array([30.0, 0.0, 0.0]), **SCOPE_OK)
+    assert s.alarm and s.alarm_reason.startswith("residual_force") and "for 50 ms" in s.alarm_reason
+
+
+@pytest.mark.parametrize("clock", sorted(CLOCKS))
+def test_a_braking_controller_is_held_after_the_timeout_whatever_the_clock(limits: JointLimits, clock: str) -> None:
+    s = started(limits)
+    q, v = _ramp(s, DEFAULT_Q0)
+    k = 0
+    while not s.alarm:
+        q = q + DT * v  # says it is braking, keeps its speed
+        s.filter(CLOCKS[clock](k), q, controller_stopping=True, **SCOPE_OK)
+        k += 1
+        assert k <= 2000
+    assert k - 1 == round(CONTROLLER_STOP_TIMEOUT / DT) and s.alarm_reason.startswith("rcm_infeasible")
+
+
+# -- a measured joint that jumps -----------------------------------------------------------------------
+def test_a_measured_joint_that_jumps_holds_even_where_the_scope_watches_cannot_see_it(limits: JointLimits) -> None:
+    """A 1 rad glitch of the last joint turns the scope about its own axis: the RCM error and the depth do
+    not change, and before, nothing held. No arm moves 1 rad in a millisecond: a corrupt reading holds."""
+    s = started(limits)
+    q, v = _ramp(s, DEFAULT_Q0, speed=0.05)
+    measured = q.copy()
+    for k in range(20):  # readings that follow the arm: no alarm
+        q, measured = q + DT * v, measured + DT * v
+        s.filter(0.5 + k * DT, q, q_measured=measured, **SCOPE_OK)
+    assert not s.alarm
+    glitch = measured + np.eye(7)[6]
+    s.filter(0.52, q + DT * v, q_measured=glitch, **SCOPE_OK)  # the scope watches are content
+    assert s.alarm and s.alarm_reason.startswith("joints_jump: measured joint 7 moved 1.0000 rad in one cycle")
+    assert s.state is SupervisorState.STOPPING  # the smooth stop, not a halt
+
+
+def test_readings_at_full_speed_across_a_gap_or_a_restart_do_not_count_as_jumps(limits: JointLimits) -> None:
+    s = started(limits)
+    q = DEFAULT_Q0.copy()
+    for k in range(5):  # 2.6 rad/s with two cycles lost between readings: 5 mrad a reading
+        q = q + 2 * DT * limits.velocity
+        s.filter(k * DT, DEFAULT_Q0, q_measured=q)
+    s.filter(0.1, DEFAULT_Q0)  # a cycle without a reading: the next one is not compared with the last
+    s.filter(0.2, DEFAULT_Q0, q_measured=q + 0.1)
+    s.start(DEFAULT_Q0, time=0.3)  # a restart: the first reading is compared with nothing
+    s.filter(0.3, DEFAULT_Q0, q_measured=DEFAULT_Q0 + 0.1)
+    assert not s.alarm and "joints_jump" not in kinds(s)
+
+
+def test_a_late_reading_may_have_moved_for_every_cycle_since_but_a_glitch_still_holds(limits: JointLimits) -> None:
+    """A cycle that comes 10 ms late (by the session clock) reads the arm 10 cycles further: at the Franka's
+    fastest joint speed, 26 mrad, more than one cycle's ``max_joint_step``; a 1 rad glitch still holds."""
+    s = started(limits)
+    q, t = DEFAULT_Q0.copy(), 0.0
+    for _ in range(3):
+        t += 10 * DT
+        q = q + 10 * DT * limits.velocity.max()
+        s.filter(t, DEFAULT_Q0, q_measured=q)
+    assert not s.alarm and "joints_jump" not in kinds(s)
+    s.filter(t + 10 * DT, DEFAULT_Q0, q_measured=q + np.eye(7)[6])
+    assert s.alarm and s.alarm_reason.startswith("joints_jump: measured joint 7 moved 1.0000 rad in 10 cycles")
+
+
+def test_a_measured_joint_past_its_limit_during_a_stop_without_an_alarm_raises_one(limits: JointLimits) -> None:
+    """During a stop asked for (end of run, Ctrl-C), a joint measured past its limit was not reported at all:
+    the run ended as a clean stop. The measured-state watches alarm there; so does the joint-limit watch now."""
+    s = started(limits)
+    q, _ = _ramp(s, DEFAULT_Q0)
+    s.stop(0.5, "end of run")
+    past = DEFAULT_Q0.copy()
+    past[0] = limits.position_upper[0] + 0.1
+    s.filter(0.501, q, q_measured=past)
+    assert s.alarm and s.alarm_reason == "joint_limit: joint 1 measured -0.1000 rad from its limit"
+    assert kinds(s)[-2:] == ["stop", "joint_limit"]  # no second stop: the one under way goes on
+
+
+def test_deadline_misses_during_the_stop_raise_one_alarm_not_one_per_cycle(limits: JointLimits) -> None:
+    """Each miss past the bound raised another ``deadline`` alarm event: one per millisecond for as long as
+    the misses went on (1149 in 1.15 s), which pushed the cause out of the bounded log and the ring."""
+    s = started(limits, cycle_budget=0.0005, max_consecutive_misses=3)
+    q, v = _ramp(s, DEFAULT_Q0)
+    for k in range(1500):
+        s.filter(0.5 + k * DT, q + (k + 1) * DT * v, compute_time=0.001)  # the reference keeps its speed
+    assert s.alarm and s.alarm_reason.startswith("deadline: 3 consecutive deadline misses")
+    assert kinds(s).count("deadline") == 1 and s.deadline_misses == 1500 and s.at_rest
+
+
+# -- measured values that are not real numbers -------------------------------------------------------
+@pytest.mark.parametrize(
+    ("measured", "reason"),
+    [
+        ({"q_measured": ["a"] * 7}, "joints_nonfinite: measured joints ['a'"),
+        ({"q_measured": DEFAULT_Q0 + 1j}, "joints_nonfinite: measured joints array("),
+        ({"q_measured": np.array([object()] * 7)}, "joints_nonfinite: measured joints array("),
+        ({"residual": ["x", "y", "z"]}, "residual_force: measured residual force ['x'"),
+        ({"residual": np.array([1j, 0.0, 0.0])}, "residual_force: measured residual force array("),
+    ],
+    ids=["joints-text", "joints-complex", "joints-objects", "residual-text", "residual-complex"],
+)
+def test_measured_values_that_are_not_real_numbers_hold_without_an_exception(
+    limits: JointLimits, measured: dict, reason: str
+) -> None:
+    """Text or objects raised out of the filter (the loop's cycle); complex values were cast to their real
+    part with a ComplexWarning (an exception where warnings are errors). A broken driver's reading holds."""
+    s = started(limits)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = s.filter(0.0, DEFAULT_Q0, **measured)
+    assert np.array_equal(out, DEFAULT_Q0) and s.alarm and s.alarm_reason.startswith(reason), s.alarm_reason
+
+
+def test_a_huge_finite_residual_force_is_measured_without_an_overflow(limits: JointLimits) -> None:
+    """|ΔF| of (1e200, 1e200, 0) overflowed in the dot product (a RuntimeWarning, an exception where warnings
+    are errors); it is 1.4e200 N, over the bound, and holds after its time like any other."""
+    s = started(limits)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in range(51):
+            s.filter(k * DT, DEFAULT_Q0, residual=np.array([1e200, 1e200, 0.0]), **SCOPE_OK)
+    assert s.alarm and s.alarm_reason.startswith("residual_force: measured residual force |ΔF| 1414213562373095")

@@ -1,7 +1,8 @@
 """The supervisor's compiled checks and its measurement of the scope at the measured joints.
 
 * :func:`command_violation`: the first limit (position, velocity, acceleration, jerk) a joint
-  command breaks after the history of commands sent, differentiated as libfranka does;
+  command breaks after the history of commands sent, differentiated as libfranka does, or that the
+  supervisor's stop begun from it would break (:func:`stop_reach`);
 * :func:`nearest_limit`: the measured joint closest to one of its limits;
 * :func:`measure_scope`: the RCM error and insertion depth at the robot's *measured* joints.
 
@@ -38,12 +39,13 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     """RCM error and insertion depth at the robot's *measured* joints, for the controller's p_R.
 
     One forward kinematics pass (:meth:`RobotModel.scope_axis_into`) and the formulas of
-    :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values
-    and arrays of the wrong shape give NaN (the supervisor then holds).
+    :mod:`lapwrench.rcm.geometry`, about 10 µs. Non-finite joints or p_R propagate to NaN values,
+    and arrays of the wrong shape or of values that are not real numbers give NaN (the supervisor then
+    holds): a broken driver's reading is a hold, never a traceback in the loop.
     """
-    q = q_measured if type(q_measured) is np.ndarray else np.asarray(q_measured, dtype=float)
-    p = p_R if _is_f64_c(p_R) else np.ascontiguousarray(p_R, dtype=float)
-    if q.shape != (model.nq,) or p.shape != (3,):
+    q = q_measured if _is_f64_c(q_measured) else real_vector(q_measured)
+    p = p_R if _is_f64_c(p_R) else real_vector(p_R)
+    if q is None or p is None or q.shape != (model.nq,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
     axis = model.scope_axis_into(q)  # the model's own arrays, used before its next evaluation
     e, depth = _axis_error_and_depth()(axis.p_E, axis.d_z, axis.P, p, float(model.length))
@@ -55,6 +57,18 @@ def _is_f64_c(x: object) -> bool:
     return type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous
 
 
+def real_vector(x: object) -> np.ndarray | None:
+    """``x`` as a C-contiguous float64 array, or None when it does not hold real numbers (text, objects,
+    complex values: numpy would raise, or warn and drop the imaginary part). For the measured values the
+    supervisor watches, off the per-cycle fast path (float64 arrays are used as they are)."""
+    if np.iscomplexobj(x):
+        return None
+    try:
+        return np.ascontiguousarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
 @functools.cache
 def _axis_error_and_depth() -> Callable[[Vec, Vec, Vec, Vec, float], tuple[float, float]]:
     """:func:`axis_rcm_error_and_depth` through its entry point for C-contiguous float64 arrays
@@ -64,12 +78,32 @@ def _axis_error_and_depth() -> Callable[[Vec, Vec, Vec, Vec, float], tuple[float
 
 
 @kernel
+def stop_reach(v: float, a: float, a_stop: float, j_stop: float, dt: float) -> tuple[float, float]:
+    """Upper bounds of the peak speed (rad/s) and of the travel (rad) in the positive direction of the
+    supervisor's stop (:meth:`~lapwrench.safety.supervisor.SafetySupervisor.stop`) begun at velocity ``v``
+    and acceleration ``a`` of one joint, braking at ``a_stop`` with jerk ``j_stop``.
+
+    An acceleration in that direction is first ramped out (the speed still grows by a²/(2 j_stop)
+    meanwhile), then the speed v1 reached is braked, in at most the continuous jerk-limited distance
+    v1²/(2 a_stop) + v1 a_stop/(2 j_stop); one more cycle at v1 covers the discretisation. Motion the
+    other way counts as none. Why: a command inside every limit can still be one the stop cannot end
+    inside them (full speed just short of a joint limit, or full acceleration at full speed); the
+    supervisor refuses such a command (:func:`command_violation`), so its stop always can."""
+    u = max(v, 0.0)
+    b = max(a, 0.0)
+    v1 = u + b * b / (2.0 * j_stop)
+    return v1, v1 * (b / j_stop + v1 / (2.0 * a_stop) + a_stop / (2.0 * j_stop) + dt)
+
+
+@kernel
 def command_violation(
     q: Vec, q_prev: Vec, v_prev: Vec, a_prev: Vec, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec,
-    j_max: Vec, dt: float,
+    j_max: Vec, stop_a: Vec, stop_j: Vec, dt: float,
 ) -> tuple[int, int, float]:
     """The first limit the command ``q`` breaks after the history (q, v, a) as libfranka differentiates
-    it: (0 none | 1 position | 2 velocity | 3 acceleration | 4 jerk, joint, value)."""
+    it: (0 none | 1 position | 2 velocity | 3 acceleration | 4 jerk, joint, value), or that the stop
+    begun from it (deceleration ``stop_a``, jerk ``stop_j``) would break (:func:`stop_reach`):
+    (6 position, joint, where the stop would end | 7 velocity, joint, the stop's peak velocity)."""
     n = q.shape[0]
     for j in range(n):
         if q[j] < lo[j] - tol or q[j] > hi[j] + tol:
@@ -85,12 +119,22 @@ def command_violation(
                 worst, jw = r, j
         if worst > 1.0 + 1e-9:
             return code, jw, value[jw]
+    for j in range(n):
+        up_speed, up = stop_reach(v[j], a[j], stop_a[j], stop_j[j], dt)
+        down_speed, down = stop_reach(-v[j], -a[j], stop_a[j], stop_j[j], dt)
+        if q[j] + up > hi[j] + tol:
+            return 6, j, q[j] + up
+        if q[j] - down < lo[j] - tol:
+            return 6, j, q[j] - down
+        if max(up_speed, down_speed) > v_max[j] * (1.0 + 1e-9):
+            return 7, j, up_speed if up_speed >= down_speed else -down_speed
     return 0, 0, 0.0
 
 
 @kernel
 def accept_command(
-    q: Vec, history: np.ndarray, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec, j_max: Vec, dt: float,
+    q: Vec, history: np.ndarray, lo: Vec, hi: Vec, tol: float, v_max: Vec, a_max: Vec, j_max: Vec, stop_a: Vec,
+    stop_j: Vec, dt: float,
 ) -> tuple[int, int, float]:
     """:func:`command_violation` of ``q`` after ``history`` (rows: the last command sent, its velocity
     and acceleration), code 5 if ``q`` is not finite; with no violation (code 0) ``q`` is accepted:
@@ -100,7 +144,9 @@ def accept_command(
     for j in range(n):
         if not math.isfinite(q[j]):
             return 5, j, q[j]
-    code, jw, value = command_violation(q, history[0], history[1], history[2], lo, hi, tol, v_max, a_max, j_max, dt)
+    code, jw, value = command_violation(
+        q, history[0], history[1], history[2], lo, hi, tol, v_max, a_max, j_max, stop_a, stop_j, dt
+    )
     if code == 0:
         for j in range(n):
             v = (q[j] - history[0, j]) / dt
@@ -129,3 +175,16 @@ def nearest_limit(q: Vec, lo: Vec, hi: Vec) -> tuple[int, float]:
         if r < room:
             jm, room = j, r
     return jm, room
+
+
+@kernel
+def measured_step(q: Vec, q_prev: Vec) -> tuple[int, float]:
+    """The measured joint that moved most since the previous reading ``q_prev`` and by how much (rad);
+    ``q_prev`` becomes ``q``, in place (one compiled call per cycle, no temporary arrays)."""
+    jm, step = 0, 0.0
+    for j in range(q.shape[0]):
+        d = abs(q[j] - q_prev[j])
+        if d > step:
+            jm, step = j, d
+        q_prev[j] = q[j]
+    return jm, step

@@ -68,6 +68,11 @@ class SupervisorConfig:
         residual_force_time: ... once it has stayed above for this long (s): the robot's force
             estimate lags the handle sensor, so a hand letting go of 30 N at once shows |ΔF| of
             ~26 N for about 25 ms without any load on the wall. A non-finite |ΔF| holds at once.
+        max_joint_step: Largest move (rad) of a measured joint from one reading to the next; more stops
+            with an alarm. No arm moves 20 mrad in a millisecond (20 rad/s, eight times the Franka's
+            fastest joint, and still 4 rad/s over a 5 ms gap in the readings): such a step is a corrupt
+            reading, which the RCM and depth watches do not see when the scope's axis stays put (a glitch
+            of the last joint turns the scope about its own axis).
         joint_warn_margin: Measured distance (rad) to a joint limit that logs an event.
         joint_stop_margin: Measured distance (rad) to a joint limit that stops with an alarm.
         cycle_budget: Compute time (s) allowed per cycle; more is a deadline miss.
@@ -85,6 +90,7 @@ class SupervisorConfig:
     depth_max: float = _DEFAULT_BOUNDS["depth_max"]
     max_residual_force: float = _DEFAULT_BOUNDS["max_residual_force"]
     residual_force_time: float = _DEFAULT_BOUNDS["residual_force_time"]
+    max_joint_step: float = 0.02
     joint_warn_margin: float = 0.04
     joint_stop_margin: float = 0.01
     cycle_budget: float = 0.0008
@@ -98,7 +104,8 @@ class SupervisorConfig:
             if isinstance(v, bool) or not isinstance(v, numbers.Real):
                 raise ValueError(f"supervisor.{f.name} must be a number, got {v!r}")
         for name in (
-            "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "cycle_budget", "rest_velocity"
+            "check_fraction", "stop_fraction", "max_rcm_error", "max_residual_force", "max_joint_step", "cycle_budget",
+            "rest_velocity",
         ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

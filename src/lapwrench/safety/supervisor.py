@@ -8,9 +8,12 @@ and jerk from the history of the commands *it actually sent*, exactly as libfran
 rest at the start pose), and checks them against the Franka limits. Then:
 
 * **Command validation.** A command that is not one finite number per joint, leaves the joint position
-  limits, or breaks a velocity/acceleration/jerk limit is *replaced* by the next sample of a
+  limits, breaks a velocity/acceleration/jerk limit, or is one from which the stop below could not end
+  inside the position and velocity limits (:func:`~lapwrench.safety.checks.stop_reach`: full speed just
+  short of a limit, full acceleration at full speed) is *replaced* by the next sample of a
   jerk-limited stop, an event is logged and the supervisor latches into a stop with an alarm.
-  A controller that produced one bad command is not trusted for the next.
+  A controller that produced one bad command is not trusted for the next. Every command accepted
+  is thus one the stop can bring to rest inside the limits, whenever a fault comes.
 * **Measured-state watches** (issue 9), joint limits and deadlines: see
   :mod:`lapwrench.safety.watches`. The caller measures the scope (:func:`measure_scope` at the
   robot's measured joints); build the thresholds from the YAML configuration with
@@ -23,6 +26,11 @@ rest at the start pose), and checks them against the Franka limits. Then:
   acceleration and jerk all stay inside the (scaled) limits and the stream ends at rest (constant
   position). :attr:`at_rest` tells when the caller may
   disconnect.
+* **Resume.** A later :meth:`start` (a restart after a hold, the robot still holding the last command)
+  keeps the command history: the robot saw the held reference, not the measured pose the controller
+  restarts from, and the two differ by the tracking error. That offset is added to the controller's
+  commands and phased out smoothly (:data:`RESUME_FRACTION` of the limits), so the reference the robot
+  receives does not jump at a resume.
 
 Events are structured :class:`SupervisorEvent` (time, kind, message) and kept in
 :attr:`SafetySupervisor.events` (bounded) and :attr:`SafetySupervisor.pending` (drained by the
@@ -47,14 +55,27 @@ from lapwrench.safety.checks import (
     command_violation,
     measure_scope,
     measured_joints_room,
+    measured_step,
     nearest_limit,
+    real_vector,
+    stop_reach,
 )
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.safety.watches import CONTROLLER_STOP_TIMEOUT, SupervisorWatches
 from lapwrench.spatial import Vec
 
+# A resume phases out the held reference's offset from the start pose using this fraction of the
+# velocity/acceleration/jerk limits (the controller's commands use up to robot.limit_fraction, 0.9,
+# of them, and the check allows 1.0) ...
+RESUME_FRACTION = 0.05
+# ... for an offset up to this (rad, any joint); a larger one is no tracking error: the robot was moved
+# (or reconnected after a recovery) and the supervisor starts afresh at the start pose, with an event.
+RESUME_MAX_OFFSET = 0.02
+
 __all__ = [
     "CONTROLLER_STOP_TIMEOUT",
+    "RESUME_FRACTION",
+    "RESUME_MAX_OFFSET",
     "MeasuredScope",
     "SafetySupervisor",
     "SupervisorConfig",
@@ -63,6 +84,7 @@ __all__ = [
     "command_violation",
     "measure_scope",
     "nearest_limit",
+    "stop_reach",
 ]
 
 
@@ -85,8 +107,8 @@ class SafetySupervisor(SupervisorWatches):
         self._a_max = np.ascontiguousarray(limits.acceleration * c.check_fraction, dtype=float)
         self._j_max = np.ascontiguousarray(limits.jerk * c.check_fraction, dtype=float)
         stop = limits.scaled(c.stop_fraction)
-        self._stop_a = stop.acceleration
-        self._stop_j = stop.jerk
+        self._stop_a = np.ascontiguousarray(stop.acceleration, dtype=float)
+        self._stop_j = np.ascontiguousarray(stop.jerk, dtype=float)
         self.replaced_commands = 0
         self.n_joints = int(limits.position_lower.shape[0])
         # The command history as libfranka differentiates it: rows q, v, a of the last command sent,
@@ -94,31 +116,81 @@ class SafetySupervisor(SupervisorWatches):
         self._history = np.zeros((3, self.n_joints))
         self._q, self._v, self._a = self._history
         self._started = False
+        self._resume_offset = np.zeros(self.n_joints)  # held reference - start pose, phased out (start)
+        self._resume_cycles = 0  # cycles the phase-out takes ...
+        self._resume_left = 0  # ... and those still to come
         # The compiled checks bound to their argument types now (:func:`lapwrench.jit.bind`: no dispatch
         # per call, nothing compiles in the first cycle); every call passes C-contiguous float64 vectors.
         z = np.zeros(self.n_joints)
-        limits_args = (self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self.dt)
+        limits_args = (
+            self._lo, self._hi, 0.0, self._v_max, self._a_max, self._j_max, self._stop_a, self._stop_j, self.dt
+        )
         self._command_violation = bind(command_violation, z, z, z, z, *limits_args)
         self._accept_command = bind(accept_command, z, np.zeros((3, self.n_joints)), *limits_args)
         self._nearest_limit = bind(nearest_limit, z, self._lo, self._hi)
         self._joints_room = bind(measured_joints_room, z, self._lo, self._hi)
+        self._measured_step = bind(measured_step, z, z)
 
     # -- state --------------------------------------------------------------------------------
     def start(self, q0: Vec, time: float = 0.0) -> None:
-        """Start supervising from rest at ``q0`` (the robot's measured joints)."""
+        """Start supervising from rest at ``q0`` (the robot's measured joints).
+
+        A restart after a hold, within :data:`RESUME_MAX_OFFSET` of the held reference, resumes from that
+        reference instead (module docstring): the controller's commands, which begin at ``q0``, reach
+        the robot shifted by the offset, phased out in :attr:`resume_cycles` cycles.
+        """
         q0 = np.asarray(q0, dtype=float)
         n = self.n_joints
         if q0.shape != (n,) or not np.all(np.isfinite(q0)):
             raise ValueError(f"supervisor start pose must be {n} finite joint positions")
-        self._history[0] = q0
-        self._history[1:] = 0.0
+        offset = self._q - q0
+        far = float(np.max(np.abs(offset)))
+        resume = self._started and self.state is SupervisorState.HOLDING and far <= RESUME_MAX_OFFSET
+        self._resume_cycles = self._resume_left = self._phase_out_cycles(offset) if resume else 0
+        if resume:
+            self._resume_offset[:] = offset  # the history stays: what the robot saw last
+            message = (f"supervision resumed from the held reference, {far * 1e3:.3f} mrad from the start pose,"
+                       f" phased out over {self._resume_cycles} cycles")
+        else:
+            if self._started and self.state is SupervisorState.HOLDING:
+                self.event(time, "start_afresh", f"the start pose is {far:.4f} rad from the held reference")
+            self._history[0] = q0
+            self._history[1:] = 0.0
+            message = "supervision started at rest"
         self.state = SupervisorState.RUNNING
         self.alarm, self.alarm_reason = False, None
         self.consecutive_misses = 0
         self._residual_over_since = None
         self._controller_stop_since = None
+        self._q_measured_seen = False  # the jump watch starts with the next reading
         self._started = True
-        self.event(time, "start", "supervision started at rest")
+        self.event(time, "start", message)
+
+    def _phase_out_cycles(self, offset: Vec) -> int:
+        """Cycles of a minimum-jerk phase-out of ``offset`` using :data:`RESUME_FRACTION` of the limits
+        (a quintic over T: peak speed 1.875 d/T, acceleration 5.774 d/T², jerk 60 d/T³)."""
+        d = np.abs(offset)
+        if not d.any():
+            return 0
+        f = RESUME_FRACTION
+        t = np.maximum.reduce([1.875 * d / (f * self._v_max), np.sqrt(5.774 * d / (f * self._a_max)),
+                               np.cbrt(60.0 * d / (f * self._j_max))])
+        return max(1, math.ceil(float(np.max(t)) / self.dt))
+
+    @property
+    def resume_cycles(self) -> int:
+        """Cycles over which the last :meth:`start` phases out the held reference's offset (0: none)."""
+        return self._resume_cycles
+
+    def _resumed(self, q_cmd: object) -> object:
+        """``q_cmd`` plus this cycle's share of the resume offset (quintic, from all of it to none)."""
+        q = real_vector(q_cmd)
+        if q is None or q.shape != self._resume_offset.shape:
+            return q_cmd  # refused by the check as it is
+        self._resume_left -= 1
+        tau = 1.0 - self._resume_left / self._resume_cycles
+        w = 1.0 - tau**3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+        return q + w * self._resume_offset
 
     @property
     def command_state(self) -> tuple[Vec, Vec, Vec]:
@@ -133,18 +205,16 @@ class SafetySupervisor(SupervisorWatches):
     # -- checks -------------------------------------------------------------------------------
     def check_command(self, q_cmd: object) -> tuple[str, str] | None:
         """(kind, message) if ``q_cmd`` is not a valid next command after the history, else None."""
-        try:
-            q = np.asarray(q_cmd, dtype=float)
-        except (TypeError, ValueError):
+        q = real_vector(q_cmd)  # None for text, objects or complex values
+        if q is None:
             return "command_invalid", "command is not numeric"
         if q.shape != self._q.shape:
             return "command_invalid", f"command has shape {q.shape}, expected {self._q.shape}"
-        q = np.ascontiguousarray(q)
         if not math.isfinite(q.sum()):
             return "command_nonfinite", f"non-finite command {np.array2string(q, precision=3)}"
         code, j, value = self._command_violation(
             q, self._q, self._v, self._a, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
-            self._a_max, self._j_max, self.dt,
+            self._a_max, self._j_max, self._stop_a, self._stop_j, self.dt,
         )
         return None if code == 0 else self._violation(q, code, j, value)
 
@@ -155,6 +225,16 @@ class SafetySupervisor(SupervisorWatches):
         if code == 1:
             return "command_position", (
                 f"joint {j + 1} command {q[j]:.4f} rad outside [{self._lo[j]:.4f}, {self._hi[j]:.4f}]"
+            )
+        if code == 6:
+            return "command_stop_position", (
+                f"joint {j + 1} command {q[j]:.4f} rad at {(q[j] - self._q[j]) / self.dt:.4g} rad/s: a stop from it"
+                f" could reach {value:.4f} rad, outside [{self._lo[j]:.4f}, {self._hi[j]:.4f}]"
+            )
+        if code == 7:
+            return "command_stop_velocity", (
+                f"joint {j + 1} command: a stop from it could reach {value:.4g} rad/s (its acceleration ramped out),"
+                f" over {self._v_max[j]:.4g}"
             )
         kind, limit, unit = (
             ("command_velocity", self._v_max, "rad/s"),
@@ -236,6 +316,8 @@ class SafetySupervisor(SupervisorWatches):
             self._watch_deadline(time, compute_time)
         if q_measured is not None:
             self._watch_joints(time, q_measured)
+        else:
+            self._q_measured_seen = False  # a later reading is not compared with one from before the gap
         self._watch_scope(time, rcm_error, depth, residual)
         self._watch_controller_stop(time, controller_stopping)
 
@@ -245,11 +327,13 @@ class SafetySupervisor(SupervisorWatches):
             return q
         if self.state is SupervisorState.STOPPING:
             return self._stop_step()
+        if self._resume_left:
+            q_cmd = self._resumed(q_cmd)
         usual = type(q_cmd) is np.ndarray and q_cmd.dtype == np.float64 and q_cmd.flags.c_contiguous
         if usual and q_cmd.shape == self._q.shape:  # checked and accepted in one compiled call
             code, j, value = self._accept_command(
                 q_cmd, self._history, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
-                self._a_max, self._j_max, self.dt,
+                self._a_max, self._j_max, self._stop_a, self._stop_j, self.dt,
             )
             if code == 0:
                 return q_cmd.copy()

@@ -9,13 +9,20 @@ the quantity and its value:
 
 * ``rcm_error``, ``insertion_depth``, ``residual_force``, ``joints_nonfinite``: the measured RCM
   error, insertion depth, residual |ΔF| (eq 19) and joints against :class:`SupervisorConfig`; a
-  non-finite value holds too;
+  non-finite value, or one that is not a real number, holds too;
+* ``joints_jump``: a measured joint that moved more than ``max_joint_step`` a cycle since the previous
+  reading (a corrupt reading: no arm moves that fast); a reading that comes late (by the session clock) may
+  have moved that much for each cycle since, up to :data:`MAX_GAP_CYCLES`;
 * **joint limits**: a *measured* joint closer than ``joint_warn_margin`` to a limit logs an event,
-  closer than ``joint_stop_margin`` stops with an alarm;
+  closer than ``joint_stop_margin`` stops with an alarm (also during a stop begun without one);
 * **deadlines**: a cycle over ``cycle_budget`` is a deadline miss (counted, logged with rate
   limiting); ``max_consecutive_misses`` in a row stop with an alarm;
 * **controller stop**: a controller braking because the RCM task left the joint limits may reach
   rest (or run for :data:`CONTROLLER_STOP_TIMEOUT`), then the arm holds.
+
+The durations (the residual force's ``residual_force_time``, the controller stop's timeout) count the
+cycles as well as the caller's clock, whichever is longer (:meth:`SupervisorWatches.lasted`): a
+stale, backward or NaN session time cannot keep a watch from firing.
 """
 
 from __future__ import annotations
@@ -25,12 +32,15 @@ from collections import deque
 
 import numpy as np
 
-from lapwrench.safety.checks import measured_joints_room, nearest_limit
+from lapwrench.safety.checks import measured_joints_room, measured_step, nearest_limit, real_vector
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.spatial import Vec
 
 # Seconds a braking controller (TickResult.rcm_infeasible) may take to reach rest before the hold.
 CONTROLLER_STOP_TIMEOUT = 1.0
+# The most cycles of motion a late measured reading is allowed (joints_jump): libfranka ends the motion after
+# about 20 missed cycles in a row, so a longer gap is no late cycle.
+MAX_GAP_CYCLES = 20.0
 
 
 def _rate_limited(count: int) -> bool:
@@ -48,6 +58,7 @@ class SupervisorWatches:
     """
 
     _v: Vec  # velocity of the last command sent, kept by the SafetySupervisor subclass
+    dt: float  # the control period (s), set by the SafetySupervisor subclass
 
     def __init__(self, config: SupervisorConfig, lo: Vec, hi: Vec) -> None:
         self.cfg = config
@@ -55,6 +66,10 @@ class SupervisorWatches:
         self._hi = np.ascontiguousarray(hi, dtype=float)
         self._nearest_limit = nearest_limit  # the subclass binds these to their argument types
         self._joints_room = measured_joints_room
+        self._measured_step = measured_step
+        self._q_measured_prev = np.zeros_like(self._lo)  # the previous measured joints ...
+        self._q_measured_seen = False  # ... if there was one (not since start, nor since a cycle without)
+        self._q_measured_time = 0.0  # ... and its session time
         self.events: deque[SupervisorEvent] = deque(maxlen=config.max_events)
         self.pending: list[SupervisorEvent] = []
         self.state = SupervisorState.HOLDING
@@ -65,7 +80,9 @@ class SupervisorWatches:
         self._counts: dict[str, int] = {}
         self._joint_warned = False
         self._residual_over_since: float | None = None
+        self._residual_over_cycles = 0
         self._controller_stop_since: float | None = None
+        self._controller_stop_cycles = 0
 
     # -- events and the alarm -----------------------------------------------------------------
     def event(self, time: float, kind: str, message: str) -> SupervisorEvent:
@@ -102,6 +119,15 @@ class SupervisorWatches:
             self.state = SupervisorState.STOPPING
             self.event(time, "stop", reason)
 
+    def lasted(self, since: float, cycles: int, time: float) -> float:
+        """How long (s) a condition first seen at session time ``since`` has lasted at ``time``, ``cycles``
+        cycles later: the longer of the clock's and the cycles' count. Each :meth:`filter` call is one
+        control period, so the count cannot be fooled by a stale, backward or NaN clock, which alone
+        would keep a timed watch (residual force, controller stop) from ever firing."""
+        by_cycles = cycles * self.dt
+        by_clock = time - since
+        return by_clock if by_clock > by_cycles else by_cycles  # a NaN clock compares False: the count
+
     # -- measured-state watches ---------------------------------------------------------------
     def _hold(self, time: float, kind: str, message: str) -> None:
         """Hold with an alarm on a measured quantity (the first alarm of a run is the one kept;
@@ -111,18 +137,24 @@ class SupervisorWatches:
 
     def _watch_joints(self, time: float, q_measured: Vec) -> None:
         c = self.cfg
-        qm = q_measured
+        qm: np.ndarray | None = q_measured
         if not (type(qm) is np.ndarray and qm.dtype == np.float64 and qm.flags.c_contiguous):
-            qm = np.ascontiguousarray(q_measured, dtype=np.float64)
+            qm = real_vector(q_measured)
+        if qm is None:
+            self._q_measured_seen = False
+            self._hold(time, "joints_nonfinite", f"measured joints {q_measured!r:.80} are not real numbers")
+            return
         if qm.shape != self._lo.shape:
+            self._q_measured_seen = False
             self._hold(time, "joints_nonfinite", f"measured joints have shape {qm.shape}, expected {self._lo.shape}")
             return
         finite, j, room = self._joints_room(qm, self._lo, self._hi)
         if not finite:
+            self._q_measured_seen = False
             self._hold(time, "joints_nonfinite", f"measured joints {np.array2string(qm, precision=3)} not finite")
             return
         if room < c.joint_stop_margin:
-            if self.state is SupervisorState.RUNNING:
+            if not self.alarm:  # also during a stop begun without an alarm: a measured limit is a fault
                 self.raise_alarm(time, "joint_limit", f"joint {j + 1} measured {room:.4f} rad from its limit")
         elif room < c.joint_warn_margin:
             if not self._joint_warned:
@@ -130,6 +162,16 @@ class SupervisorWatches:
                 self._joint_warned = True
         else:
             self._joint_warned = False
+        seen, self._q_measured_seen = self._q_measured_seen, True
+        cycles = (time - self._q_measured_time) / self.dt  # since the previous reading, by the clock
+        self._q_measured_time = time
+        js, step = self._measured_step(qm, self._q_measured_prev)  # the previous reading becomes this one
+        # a late reading (a late cycle) may have moved further: up to MAX_GAP_CYCLES cycles' worth
+        allowed = c.max_joint_step * (min(max(cycles, 1.0), MAX_GAP_CYCLES) if math.isfinite(cycles) else 1.0)
+        if seen and step > allowed:
+            span = f"{cycles:.3g} cycles" if cycles > 1.5 else "one cycle"  # NaN compares False
+            self._hold(time, "joints_jump", f"measured joint {js + 1} moved {step:.4f} rad in {span}"
+                                            f" (> {allowed:.4f}): a corrupt reading")
 
     def _watch_scope(self, time: float, rcm_error: float | None, depth: float | None, residual: Vec | None) -> None:
         c = self.cfg
@@ -145,32 +187,42 @@ class SupervisorWatches:
                 f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
             )
         if residual is not None:
-            r = np.asarray(residual, dtype=float)
+            r = residual if type(residual) is np.ndarray and residual.dtype == np.float64 else real_vector(residual)
+            if r is None:
+                self._hold(time, "residual_force", f"measured residual force {residual!r:.80} is not real numbers")
+                return
             if r.shape != (3,):  # ΔF is a force: a wrench or a matrix here is a wiring fault, not a force
                 self._hold(time, "residual_force", f"measured residual force has shape {r.shape}, expected 3 values")
                 return
-            f = math.sqrt(r.dot(r))  # np.linalg.norm's formula for a vector, without its overhead
+            f = math.hypot(r[0], r[1], r[2])  # no overflow (and no warning) for huge finite values
             over = not (f <= c.max_residual_force)
             if not over:
                 self._residual_over_since = None
             elif self._residual_over_since is None:
-                self._residual_over_since = time
-            if over and (not math.isfinite(f) or time - self._residual_over_since >= c.residual_force_time - 1e-9):
+                self._residual_over_since, self._residual_over_cycles = time, 0
+            else:
+                self._residual_over_cycles += 1
+            if not over:
+                return
+            lasted = self.lasted(self._residual_over_since, self._residual_over_cycles, time)
+            if not math.isfinite(f) or lasted >= c.residual_force_time - 1e-9:
                 self._hold(
                     time,
                     "residual_force",
-                    f"measured residual force |ΔF| {f:.1f} N > {c.max_residual_force:.1f} N"
-                    f" for {(time - self._residual_over_since) * 1e3:.0f} ms",
+                    f"measured residual force |ΔF| {f:.1f} N > {c.max_residual_force:.1f} N for {lasted * 1e3:.0f} ms",
                 )
 
     def _watch_controller_stop(self, time: float, stopping: bool) -> None:
         if not stopping or self.state is not SupervisorState.RUNNING:
             return
         if self._controller_stop_since is None:
-            self._controller_stop_since = time
+            self._controller_stop_since, self._controller_stop_cycles = time, 0
             self.event(time, "rcm_infeasible", "the RCM task cannot be kept inside the joint limits; braking")
+        else:
+            self._controller_stop_cycles += 1
         at_rest = float(np.max(np.abs(self._v))) < 10.0 * self.cfg.rest_velocity
-        if at_rest or time - self._controller_stop_since >= CONTROLLER_STOP_TIMEOUT:
+        lasted = self.lasted(self._controller_stop_since, self._controller_stop_cycles, time)
+        if at_rest or lasted >= CONTROLLER_STOP_TIMEOUT - 1e-9:
             self._hold(time, "rcm_infeasible", "the RCM task could not be kept inside the joint limits")
 
     def _watch_deadline(self, time: float, compute_time: float) -> None:
@@ -181,7 +233,9 @@ class SupervisorWatches:
             self.counted_event(
                 time, "deadline_miss", f"cycle busy time {compute_time * 1e6:.0f} us > {c.cycle_budget * 1e6:.0f} us"
             )
-            if c.max_consecutive_misses and self.consecutive_misses >= c.max_consecutive_misses:
+            # once, when the run of misses reaches the bound: a miss in every cycle of the stop that follows
+            # is counted above, not another alarm event per millisecond (which would flood the log)
+            if c.max_consecutive_misses and self.consecutive_misses == c.max_consecutive_misses:
                 self.raise_alarm(time, "deadline", f"{self.consecutive_misses} consecutive deadline misses")
         else:
             self.consecutive_misses = 0
