@@ -85,7 +85,7 @@ def regularised_inverse(A: Mat, rcond: float = RCOND) -> Mat:
     if ok and _frobenius_condition(A, A_inv) <= CHOLESKY_CONDITION:
         return A_inv  # well conditioned: Cholesky and LU agree to round-off, the factor is cheaper
     try:
-        A_inv = np.linalg.inv(A)
+        A_inv = np.linalg.inv(A)  # type: ignore[assignment]  # float64 in and out; numpy's stubs: "floating"
     except Exception:  # singular (numpy's LinAlgError; numba raises its own)
         return _damped_inverse(A, rcond)
     if rcond * _frobenius_condition(A, A_inv) <= 1.0:  # False on inf/nan

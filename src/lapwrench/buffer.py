@@ -30,9 +30,9 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Generic, Protocol, TypeVar
 
-__all__ = ["LatestValue", "RateMonitor", "RateStats", "Sample"]
+__all__ = ["LatestValue", "RateMonitor", "RateStats", "Sample", "SampleBuffer"]
 
 T = TypeVar("T")
 
@@ -54,6 +54,13 @@ class Sample(Generic[T]):
     def age(self, now: float | None = None) -> float:
         """Seconds elapsed since ``timestamp`` (``now`` defaults to ``time.monotonic()``)."""
         return (time.monotonic() if now is None else now) - self.timestamp
+
+
+class SampleBuffer(Protocol[T]):
+    """What a reader of the latest sample needs: a :class:`LatestValue`, or another process's slot
+    (:class:`~lapwrench.hardware.rt.inputs.ShmInput`)."""
+
+    def get(self) -> Sample[T] | None: ...
 
 
 class LatestValue(Generic[T]):

@@ -23,6 +23,7 @@ from typing import NamedTuple, TypeVar
 
 import numpy as np
 
+from lapwrench import tick_entry as entry
 from lapwrench.allocation import nullspace_wrench
 from lapwrench.inputs import Reading, real_array
 from lapwrench.jit import bind
@@ -88,7 +89,7 @@ _NO_EXTRA = _Extra(np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((6, 6)), np.zero
 _NO_TELEMETRY: dict[str, tuple[float, ...]] = {}
 
 
-def _reading_args(inputs: ValidInputs) -> tuple[object, ...]:
+def _reading_args(inputs: ValidInputs) -> entry.ReadingArgs:
     """The readings as the stages take them: F/T force, torque, valid; tactile values, valid; image points
     (the validator hands on C-contiguous float64 arrays of the right shapes only, the bound types)."""
     ft, tactile, obs = inputs.ft, inputs.tactile, inputs.instruments
@@ -128,7 +129,7 @@ class CompiledTick:
 
     def _state_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
-    ) -> tuple[object, ...]:
+    ) -> entry.StateArgs:
         """The arguments both entry stages begin with: the terms, the adaptive RCM state and parameters, the
         robot's force estimate, the measured-feedback offsets and {E}'s measured placement."""
         robot = inputs.robot
@@ -141,13 +142,13 @@ class CompiledTick:
 
     def _front_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool]
-    ) -> tuple[object, ...]:
+    ) -> entry.FrontArgs:
         return (*self._state_args(terms, inputs, placement), *_reading_args(inputs)[:5], self.tare, self.params)
 
     def _tick_args(
         self, terms: KinematicTerms, inputs: ValidInputs, placement: tuple[Mat, Vec, bool], ddq_ref: Vec,
         stopping: bool, R_E0: Mat, may_admit: bool,
-    ) -> tuple[object, ...]:
+    ) -> entry.TickArgs:
         return (
             *self._state_args(terms, inputs, placement), *_reading_args(inputs), _f64(ddq_ref), bool(stopping), R_E0,
             bool(may_admit), self.sat, self.tare, self.params,
@@ -156,7 +157,7 @@ class CompiledTick:
     def _motion_args(
         self, s_star: float, inputs: ValidInputs, extra: _Extra, ddq_ref: Vec, stopping: bool, R_E0: Mat,
         may_admit: bool,
-    ) -> tuple[object, ...]:
+    ) -> entry.MotionArgs:
         return (
             self._buf, s_star, *_reading_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
             _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
@@ -295,7 +296,7 @@ _A = TypeVar("_A")
 
 def _read_only(a: _A) -> _A:
     """A read-only view of ``a`` (``a`` itself when it is not an array)."""
-    if type(a) is not np.ndarray:
+    if not isinstance(a, np.ndarray):
         return a
     v = a.view()
     v.setflags(write=False)
@@ -307,7 +308,7 @@ _Views = TypeVar("_Views", Kinematics, TaskGeometry)
 
 def _read_only_tuple(t: _Views) -> _Views:
     """The named tuple ``t`` with read-only views of its arrays."""
-    return t._make(_read_only(a) for a in t)
+    return type(t)._make(_read_only(a) for a in t)
 
 
 class ReadOnlyInputs:

@@ -83,7 +83,8 @@ def _prune(root: Path, keep: str) -> None:
             pass
 
 
-numba.config.CACHE_DIR = str(cache_dir())
+# numba.config sets its options from the environment at run time (globals().update): mypy sees none of them
+numba.config.CACHE_DIR = str(cache_dir())  # type: ignore[attr-defined]
 # numba's hints that '@' is faster on contiguous arrays are for developers (bench/tick.py measures the
 # tick); a user compiling on first use must not see them between the command's own lines
 warnings.filterwarnings("ignore", category=numba.core.errors.NumbaPerformanceWarning)
@@ -91,12 +92,13 @@ warnings.filterwarnings("ignore", category=numba.core.errors.NumbaPerformanceWar
 
 def kernel(fn: F) -> F:
     """Compile ``fn`` in nopython mode with the on-disk cache; releases the GIL while it runs."""
-    return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[no-any-return]
+    # a Dispatcher[F], called as F takes (under NUMBA_DISABLE_JIT, fn itself): no annotation says "an F"
+    return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
 
 
 def jit_enabled() -> bool:
     """False under ``NUMBA_DISABLE_JIT=1`` (the functions then run as plain Python)."""
-    return not numba.config.DISABLE_JIT
+    return not numba.config.DISABLE_JIT  # type: ignore[attr-defined]  # set at run time, as CACHE_DIR
 
 
 def bind(fn: F, *example_args: Any) -> F:
@@ -111,4 +113,4 @@ def bind(fn: F, *example_args: Any) -> F:
     if not jit_enabled():
         return fn
     sig = tuple(numba.typeof(a) for a in example_args)
-    return fn.compile(sig)  # type: ignore[attr-defined, no-any-return]
+    return fn.compile(sig)  # type: ignore[attr-defined]  # a kernel (a Dispatcher) when the JIT is on

@@ -133,7 +133,8 @@ class ControlLoop:
         self._controller_failed = False
         self._hooks_failed: set[str] = set()
         self._tail = 0.0  # the loop's own work around the previous command (s): module docstring
-        self._pre_command, self._t_after = 0.0, None  # the previous cycle's: filter time (s), command's return
+        self._pre_command = 0.0  # the previous cycle's filter time (s)
+        self._t_after: float | None = None  # when the previous cycle's command returned (perf_counter)
         self._started = False
         self.last_result: TickResult | None = None
         self.last_reading: RobotReading | None = None
@@ -149,7 +150,7 @@ class ControlLoop:
         self.t0 = self.clock()
         for s in self.sources:
             if hasattr(s, "t0"):
-                s.t0 = self.t0  # type: ignore[attr-defined]
+                s.t0 = self.t0
         self.controller.reset(reading.q, p_R, tare_q)
         assert self.controller.rcm is not None
         measure_scope(self.controller.model, reading.q, self.controller.rcm.p_R)  # loads its compiled code now

@@ -242,19 +242,18 @@ class InputValidator:
             q, dq = _vector(rob_r.q, n), _vector(rob_r.dq, n)
             if rob_r.external_force is not None:
                 fext = _vector(rob_r.external_force, 3)
-        ok_ft = f is not None and m is not None
-        ok_rob = q is not None and dq is not None
+        f_in, m_in = (f, m) if f is not None and m is not None else (None, None)  # both vectors, or neither
+        q_in, dq_in = (q, dq) if q is not None and dq is not None else (None, None)
         s_ft, nf, nm, s_tac, s_pts, s_rob, s_ext = self._frame_status(
-            f if ok_ft else _Z3, m if ok_ft else _Z3, self._force_range, self._torque_range,
+            _Z3 if f_in is None else f_in, _Z3 if m_in is None else m_in, self._force_range, self._torque_range,
             self._zero_tactile if v is None else v, _NO_POINTS if pts is None else pts, self._width, self._height,
-            q if ok_rob else self._zero_q, dq if ok_rob else self._zero_q, self._q_lo, self._q_hi,
+            self._zero_q if q_in is None else q_in, self._zero_q if dq_in is None else dq_in, self._q_lo, self._q_hi,
             self.position_tolerance, self._dq_max, _Z3 if fext is None else fext, self.max_external_force,
         )
-        ft = None if ft_r is None else self._ft(ft_r, f if ok_ft else None, m, s_ft, nf, nm, t, events)
+        ft = None if ft_r is None else self._ft(ft_r, f_in, m, s_ft, nf, nm, t, events)
         tactile = None if tac_r is None else self._tactile(tac_r, v, s_tac, t, events)
         instruments = None if obs_r is None else self._instruments(frame, pts, pts_why, s_pts, events)
-        robot = None if rob_r is None else self._robot(rob_r, q if ok_rob else None, dq, fext, s_rob, s_ext, t,
-                                                       events)
+        robot = None if rob_r is None else self._robot(rob_r, q_in, dq, fext, s_rob, s_ext, t, events)
         extra = self._extra(frame.extra, t, events) if frame.extra else {}
         return ValidInputs(ft, tactile, instruments, robot, events, extra)
 

@@ -25,11 +25,11 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from typing import Any, Protocol, TypeVar, runtime_checkable
+from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
-from lapwrench.buffer import LatestValue
+from lapwrench.buffer import SampleBuffer
 from lapwrench.inputs import BUILT_IN_INPUTS, InputSpec, Reading
 from lapwrench.plugins import NAME
 from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, TactileReading
@@ -62,7 +62,7 @@ def _check_age(max_age: float, name: str) -> float:
     return float(max_age)
 
 
-class Observable:
+class Observable(Generic[R]):
     """A simulated source (dm_control's observable): samples ``read(t)`` every ``update_interval`` s;
     each sample arrives ``delay`` s after it was taken, passed through ``corruptor`` if given.
 
@@ -87,11 +87,11 @@ class Observable:
         if not (math.isfinite(delay) and delay >= 0):
             raise ValueError(f"delay must be >= 0, got {delay!r}")
         self.kind = kind
-        self.read = read
+        self.read: Callable[[float], R | None] = read
         self.update_interval = float(update_interval)
         self.delay = float(delay)
         self.max_age = _check_age(max_age, kind)
-        self.corruptor = corruptor
+        self.corruptor: Callable[[R, np.random.Generator], R | None] | None = corruptor
         self.rng = np.random.default_rng(seed)
         self._next = -math.inf
         self._in_flight: deque[tuple[float, R]] = deque()
@@ -120,19 +120,20 @@ class Observable:
         return self._latest
 
 
-class BufferSource:
-    """A hardware source: the newest sample of a driver's :class:`LatestValue`, converted to a reading.
+class BufferSource(Generic[R]):
+    """A hardware source: the newest sample of a driver's :class:`~lapwrench.buffer.LatestValue` (or of another
+    process's slot), converted to a reading.
 
     ``convert(value, stamp)`` builds the reading from the driver's value and the sample's time in
     session seconds (its monotonic arrival time minus ``t0``, set by the loop when it starts).
     """
 
     def __init__(
-        self, kind: str, buffer: LatestValue[Any], convert: Callable[[Any, float], R], *, max_age: float
+        self, kind: str, buffer: SampleBuffer[Any], convert: Callable[[Any, float], R], *, max_age: float
     ) -> None:
         self.kind = _check_kind(kind)
         self.buffer = buffer
-        self.convert = convert
+        self.convert: Callable[[Any, float], R] = convert
         self.max_age = _check_age(max_age, kind)
         self.t0 = 0.0
 
@@ -164,7 +165,7 @@ def instruments_reading(value: Any, stamp: float) -> InstrumentObservation:
     return InstrumentObservation(value.points, stamp)
 
 
-def simulated_input(spec: InputSpec, world: Any, seed: int = 0) -> Observable:
+def simulated_input(spec: InputSpec, world: Any, seed: int = 0) -> Observable[Reading]:
     """The simulated source of a registered input: ``spec.simulate(world)`` sampled every
     ``spec.update_interval`` s, arriving ``spec.delay`` s later (ValueError if it has none)."""
     if spec.simulate is None:

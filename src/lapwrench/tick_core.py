@@ -282,7 +282,8 @@ def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinemati
 
 
 @kernel
-def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickParams) -> tuple:  # type: ignore[type-arg]
+def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
+                     p: TickParams) -> tuple[bool, Mat, np.ndarray, bool]:
     """Step 7 when the desired acceleration breaks a limit: the joint box and the envelope met as hard
     rows with the RCM task kept (:func:`~lapwrench.motion.saturation.solve_exact`), then the next
     reference. Returns (solved, ref rows [q⁺, q̇⁺, q̈⁺], which rows are at a bound, clamped); not
@@ -302,12 +303,15 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec, p: TickP
     return True, ref, at, clamped
 
 
+MotionTail = tuple[Mat, Mat, int, float, int, bool, bool, bool, bool]  # what motion_tail returns (its docstring)
+
+
 @kernel
 def motion_tail(
     kin: Kinematics, geo: TaskGeometry, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec, has_tactile: bool,
     points: Mat, extra_W: Mat, extra_points: Mat, extra_D: Mat, extra_task_F: Vec, ddq_ref: Vec, stopping: bool,
     R_E0: Mat, depth_offset: float, may_admit: bool, sat: SaturationInputs, p: TickParams,
-) -> tuple:  # type: ignore[type-arg]
+) -> MotionTail:
     """M⁻¹ from the tick's M (:func:`~lapwrench.robot.model.inverse_inertia`), :func:`motion_stage`,
     then (with ``may_admit``) the next reference: directly when the desired acceleration meets every
     limit, through :func:`saturation_stage` when it does not. When it is not admitted, ``sat`` holds
@@ -349,7 +353,7 @@ def tick_front(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
     R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
     has_tactile: bool, tare: FtTare, p: TickParams,
-) -> tuple:  # type: ignore[type-arg]
+) -> tuple[Kinematics, TaskGeometry, Vec, Vec, bool, Vec, Vec]:
     """The tick up to the cues: the kinematics from Pinocchio's terms; the hand's wrench from the F/T reading
     (:func:`~lapwrench.wrenches.ft_zero.conditioned_ft`: the grip's weight at {H}'s measured rotation, {H}
     being parallel to {E}, or the reference's without a measurement; the zero, ``tare.zero`` stepped in
@@ -377,7 +381,7 @@ def tick_stage(
     R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
     has_tactile: bool, points: Mat, ddq_ref: Vec, stopping: bool, R_E0: Mat, may_admit: bool, sat: SaturationInputs,
     tare: FtTare, p: TickParams,
-) -> tuple:  # type: ignore[type-arg]
+) -> tuple[Mat, bool, *MotionTail]:
     """The whole compiled tick in one call, when every cue is compiled (no Python cues): :func:`tick_front`
     and :func:`motion_tail` (on the hand's wrench, the conditioned F/T reading).
 

@@ -22,9 +22,21 @@ from lapwrench.rcm.adaptive import AdaptiveParams, AdaptiveState
 from lapwrench.rcm.geometry import TaskGeometry
 from lapwrench.robot.model import Kinematics, KinematicTerms
 from lapwrench.spatial import Mat, Vec
-from lapwrench.tick_core import SaturationInputs, motion_tail, tick_front
+from lapwrench.tick_core import MotionTail, SaturationInputs, motion_tail, tick_front
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.ft_zero import FtTare
+
+# The arguments of the entry points (tick_stage, front_into, motion_tail_from) in their order, as the controller
+# packs them (lapwrench.compiled_tick). The readings: F/T force, torque, valid; tactile values, valid; image
+# points. The state: the terms, the adaptive RCM state and parameters, the robot's force estimate and whether
+# it has one, the measured-feedback offsets, {E}'s measured placement and whether it is measured.
+ReadingArgs = tuple[Vec, Vec, bool, Vec, bool, Mat]
+StateArgs = tuple[KinematicTerms, AdaptiveState, AdaptiveParams, Vec, bool, Vec, Mat, Vec, bool]
+FrontArgs = tuple[*StateArgs, Vec, Vec, bool, Vec, bool, FtTare, TickParams]  # front_into without the buffer
+TickArgs = tuple[*StateArgs, *ReadingArgs, Vec, bool, Mat, bool, SaturationInputs, FtTare, TickParams]
+MotionArgs = tuple[
+    Vec, float, *ReadingArgs, Mat, Mat, Mat, Vec, Vec, bool, Mat, float, bool, SaturationInputs, TickParams
+]
 
 
 @kernel
@@ -94,7 +106,7 @@ def motion_tail_from(
     buf: Vec, s_star: float, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec, has_tactile: bool,
     points: Mat, extra_W: Mat, extra_points: Mat, extra_D: Mat, extra_task_F: Vec, ddq_ref: Vec, stopping: bool,
     R_E0: Mat, depth_offset: float, may_admit: bool, sat: SaturationInputs, p: TickParams,
-) -> tuple:  # type: ignore[type-arg]
+) -> MotionTail:
     """:func:`~lapwrench.tick_core.motion_tail` on the kinematics and geometry :func:`front_into` wrote
     into ``buf`` (with s* = ``s_star``); returns what it returns."""
     kin, geo = front_views(buf, ddq_ref.shape[0], s_star)

@@ -11,6 +11,7 @@ import numpy as np
 from lapwrench.config import Config
 from lapwrench.motion.envelope import EnvelopeParams
 from lapwrench.motion.measured_feedback import FEEDBACK_TIME
+from lapwrench.motion.virtual_model import Integrator
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Mat, Vec
 from lapwrench.wrenches.ft_zero import zero_gain
@@ -36,7 +37,7 @@ class TickParams(NamedTuple):
     joint_limit_zone: float
     joint_limit_stiffness: float
     stop_time: float
-    integrator: str
+    integrator: Integrator
     q_lo: Vec  # joint position band of the shaper (limits minus the margin)
     q_hi: Vec
     v_max: Vec  # scaled joint limits

@@ -188,7 +188,8 @@ def open_sources(
         devices.add(fake.close)
         ft_url = f"hex://127.0.0.1:{fake.port}"
         master, slave = os.openpty()
-        devices.add(lambda: (os.close(master), os.close(slave)))
+        devices.add(lambda: os.close(slave))  # closed in reverse order: the master first
+        devices.add(lambda: os.close(master))
         writer = TactileWriter(master, script.tactile, fmt=fmt).start()
         devices.add(writer.stop)
         tactile_port = os.ttyname(slave)
@@ -356,7 +357,8 @@ def _simulated_devices(
     fake = SimulatedHexProcess(script.force_H).start()
     devices.add(fake.close)
     master, slave = os.openpty()
-    devices.add(lambda: (os.close(master), os.close(slave)))
+    devices.add(lambda: os.close(slave))  # closed in reverse order: the master first
+    devices.add(lambda: os.close(master))
     writer = TactileWriter(master, script.tactile, fmt=fmt).start()
     devices.add(writer.stop)
     return f"hex://127.0.0.1:{fake.port}", os.ttyname(slave), fake

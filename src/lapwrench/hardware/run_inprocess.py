@@ -56,7 +56,7 @@ def _run_in_process_signalled(args: argparse.Namespace, cfg: Any, signals: StopS
         print(f"lapwrench run: {robot_desc} connected; devices: {described or 'none'}", file=sys.stderr)
         if script is not None:
             script.t0 = time.monotonic()
-        stats = loop.run(args.duration, stop)  # type: ignore[arg-type]
+        stats = loop.run(args.duration, stop)
         if logger is not None and stop.reason is not None and stop.at is not None:
             logger.event(loop.session_time(stop.at), "stop_requested", f"{stop.reason}: stopping to rest")
     except (CliError, RobotError) as exc:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from lapwrench import loop
-from lapwrench.buffer import LatestValue
+from lapwrench.buffer import LatestValue, SampleBuffer
 from lapwrench.controller import Controller
 from lapwrench.hardware.log import RunLogger
 from lapwrench.hardware.log.record import cycle_record
@@ -75,9 +75,9 @@ class Sources:
     (:mod:`lapwrench.inputs`), each a buffer of arrays and its maximum age.
     """
 
-    ft: LatestValue[Any] | None = None
-    tactile: LatestValue[Any] | None = None
-    instruments: LatestValue[InstrumentObservation] | None = None
+    ft: SampleBuffer[Any] | None = None
+    tactile: SampleBuffer[Any] | None = None
+    instruments: SampleBuffer[InstrumentObservation] | None = None
     extra: dict[str, tuple[Any, float]] = field(default_factory=dict)  # registered inputs: (buffer, max age s)
 
 
@@ -181,9 +181,9 @@ class ControlLoop(loop.ControlLoop):
             pre_cycle=pre_cycle, after_command=after_command, stop_timeout=stop_timeout,
             switch_interval=switch_interval, gc_freeze=gc_freeze,
         )
-        self.sources = sources or Sources()  # type: ignore[assignment]
+        self.sources = sources or Sources()
 
-    @property  # type: ignore[override]
+    @property
     def sources(self) -> list[Source]:
         return self._source_list
 

@@ -92,7 +92,7 @@ def _attach_untracked(name: str) -> shared_memory.SharedMemory:
     try:
         return shared_memory.SharedMemory(name=name, create=False)
     finally:
-        resource_tracker.register = original  # type: ignore[assignment]
+        resource_tracker.register = original
 
 
 class Bus:
@@ -117,6 +117,7 @@ class Bus:
     @classmethod
     def create(cls, layout: Layout) -> Bus:
         shm = shared_memory.SharedMemory(create=True, size=max(layout.size, 1))
+        assert shm.buf is not None  # None only once closed
         np.frombuffer(shm.buf, dtype=np.uint8)[:] = 0
         return cls(shm, layout, owner=True)
 

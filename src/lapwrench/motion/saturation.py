@@ -153,7 +153,8 @@ def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
     f = np.ascontiguousarray
     a_d, M, J, C = f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64), f(rows.C, dtype=np.float64)
     lo, hi, scale = f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64), f(rows.scale, dtype=np.float64)
-    a, status = solve_exact(np.linalg.inv(M), a_d, J, C, lo, hi, scale)
+    Minv: Mat = np.linalg.inv(M)  # type: ignore[assignment]  # float64 in and out; numpy's stubs: "floating"
+    a, status = solve_exact(Minv, a_d, J, C, lo, hi, scale)
     if status == QP_SOLVED:
         return a
     if status == QP_INFEASIBLE:

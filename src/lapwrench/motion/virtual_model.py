@@ -26,6 +26,8 @@ from lapwrench.jit import kernel
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec, lu_solve_in_place, matmul
 
+Integrator = Literal["semi_implicit", "explicit"]  # motion.integrator
+
 
 @kernel
 def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
@@ -108,7 +110,7 @@ def euler_velocity_step(
     tau: Vec,
     damping: Mat,
     dt: float,
-    integrator: Literal["semi_implicit", "explicit"] = "semi_implicit",
+    integrator: Integrator = "semi_implicit",
 ) -> Vec:
     """One Euler step of the velocity: returns θ̇⁺ (the caller integrates θ⁺ = θ + dt θ̇⁺).
 

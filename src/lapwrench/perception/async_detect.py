@@ -233,6 +233,7 @@ class ThreadedAsyncDetector(_AsyncBase):
                     self._cond.wait()
                 if self._closed:
                     return
+                assert self._pending_frame is not None  # the wait ends on a frame or on close
                 image, stamp = self._pending_frame
                 self._pending_frame = None
             try:

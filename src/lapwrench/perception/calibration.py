@@ -105,6 +105,7 @@ def board_object_points(board: tuple[int, int], square_size: float) -> np.ndarra
 
 
 def _load_gray(src: ImageSource, label: str) -> np.ndarray:
+    img: np.ndarray | None
     if isinstance(src, np.ndarray):
         img = src
     else:

@@ -119,7 +119,7 @@ class ClassicalDetector:
         vf = v.astype(np.float32)
         chroma = s.astype(np.float32) * vf * np.float32(1.0 / 255.0)
         dark_grey = (vf < p.shaft_max_value) & (chroma < p.shaft_chroma_slope * vf + p.shaft_chroma_offset)
-        shaft = dark_grey.astype(np.uint8) * 255
+        shaft: np.ndarray = dark_grey.astype(np.uint8) * 255
         shaft = cv2.morphologyEx(shaft, cv2.MORPH_OPEN, self._open)
         shaft = cv2.morphologyEx(shaft, cv2.MORPH_CLOSE, self._close)
         jaw = ((s < p.jaw_max_saturation) & (v > p.jaw_min_value)).astype(np.uint8) * 255
@@ -168,7 +168,7 @@ class ClassicalDetector:
                 if p.box == "jaws" and jaw_pts is None:
                     continue
                 tip = self._tip(all_pts, mean, evecs[:, 1], (ws, hs), jaw_pts)
-                box_pts = jaw_pts if p.box == "jaws" else all_pts
+                box_pts = jaw_pts if p.box == "jaws" and jaw_pts is not None else all_pts  # jaws: not None (above)
                 bx0, by0 = box_pts.min(axis=0)
                 bx1, by1 = box_pts.max(axis=0) + 1.0
                 boxes.append((bx0 / scale, by0 / scale, bx1 / scale, by1 / scale))

@@ -142,8 +142,8 @@ def average_precision(tp_sorted: np.ndarray, n_gt: int) -> float:
 
 
 def evaluate_predictions(
-    predictions: Sequence[Sequence[Detection]] | Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
-    truths: Sequence[GroundTruth] | Sequence[tuple[np.ndarray, np.ndarray]],
+    predictions: Sequence[Sequence[Detection] | tuple[np.ndarray, np.ndarray, np.ndarray]],
+    truths: Sequence[GroundTruth | tuple[np.ndarray, np.ndarray]],
     *,
     iou_threshold: float = 0.5,
     score_threshold: float = 0.25,

@@ -84,8 +84,8 @@ def _border_point(size: tuple[int, int], rng: np.random.Generator) -> np.ndarray
 
 def draw_instrument(
     img: np.ndarray,
-    entry: Sequence[float],
-    tip: Sequence[float],
+    entry: Sequence[float] | np.ndarray,
+    tip: Sequence[float] | np.ndarray,
     rng: np.random.Generator,
     width: int = 16,
 ) -> DrawnInstrument:
@@ -305,13 +305,13 @@ def make_tiny_conv_yolo_onnx(
     nodes = []
     prev, c_in = "images", 3
     for k, c_out in enumerate(channels):
-        wname, bname, out = f"w{k}", f"b{k}", f"x{k}"
+        wname, bname, xname = f"w{k}", f"b{k}", f"x{k}"
         w = (rng.normal(0, np.sqrt(2.0 / (9 * c_in)), (c_out, c_in, 3, 3))).astype(np.float32)
         inits += [numpy_helper.from_array(w, wname), numpy_helper.from_array(np.zeros(c_out, np.float32), bname)]
         nodes.append(helper.make_node("Conv", [prev, wname, bname], [f"c{k}"], kernel_shape=[3, 3],
                                       strides=[2, 2], pads=[1, 1, 1, 1]))
-        nodes.append(helper.make_node("Relu", [f"c{k}"], [out]))
-        prev, c_in = out, c_out
+        nodes.append(helper.make_node("Relu", [f"c{k}"], [xname]))
+        prev, c_in = xname, c_out
     no = 4 + num_classes
     wh = rng.normal(0, 0.1, (no, c_in, 1, 1)).astype(np.float32)
     bh = np.r_[np.full(4, 8.0), np.full(num_classes, -4.0)].astype(np.float32)

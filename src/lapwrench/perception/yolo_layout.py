@@ -86,9 +86,9 @@ def infer_layout(
     # Four-output end-to-end head (TensorRT-style EfficientNMS export), by name then by shape.
     if len(outputs) >= 4:
         idx: dict[str, int] = {}
-        for role, candidates in _SPLIT_NAMES.items():
+        for role, role_names in _SPLIT_NAMES.items():
             for i, name in enumerate(names):
-                if name in candidates:
+                if name in role_names:
                     idx[role] = i
                     break
         if len(idx) < 4 and len(outputs) == 4:

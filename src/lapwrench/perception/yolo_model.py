@@ -153,7 +153,7 @@ def meta_imgsz(meta: dict[str, str]) -> tuple[int, int] | None:
     """The ``imgsz`` metadata as (h, w) if it is one or two sizes in [1, MAX_INPUT_SIDE], else None."""
     val = _literal(meta.get("imgsz"))
     hw = (val, val) if type(val) is int else tuple(val) if isinstance(val, list | tuple) else ()
-    return hw if len(hw) == 2 and _valid_size(hw) else None  # type: ignore[return-value]
+    return hw if len(hw) == 2 and _valid_size(hw) else None
 
 
 def check_floating_outputs(path: Path, layout: LayoutInfo, names: list[str], outputs: Sequence[object]) -> None:

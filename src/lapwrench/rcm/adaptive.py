@@ -40,7 +40,7 @@ import numpy as np
 
 from lapwrench.config import AdaptiveRcmConfig
 from lapwrench.jit import kernel
-from lapwrench.shaping import sine_ramp
+from lapwrench.shaping import RampVariant, sine_ramp
 from lapwrench.spatial import Mat, Vec, inner, matvec
 
 GATE_SIGNALS = ("angular_speed", "linear_speed", "angular_acceleration", "linear_acceleration")
@@ -53,7 +53,7 @@ class AdaptiveParams(NamedTuple):
     F_op: float
     gamma1: float
     gamma2: float
-    ramp: str
+    ramp: RampVariant
     alpha: float
     beta: float
     epsilon: float
@@ -104,7 +104,7 @@ def residual_force(F_s: Vec, F_m: Vec) -> Vec:
 
 
 @kernel
-def dead_zone_saturation(residual: Vec, gamma1: float, gamma2: float, F_op: float, ramp: str) -> Vec:
+def dead_zone_saturation(residual: Vec, gamma1: float, gamma2: float, F_op: float, ramp: RampVariant) -> Vec:
     """Eqs (20)-(22), per axis: F_re = sgn(ΔF) Φ(|ΔF|), Φ the dead-zone / sine / saturation map."""
     out = np.zeros(3)
     for i in range(3):

@@ -48,7 +48,7 @@ def arm_limits(kind: str, model: pin.Model | None = None) -> JointLimits:
     ``ValueError`` for an arm that is not registered."""
     t = arm_spec(kind).limits
     if model is None:
-        model = pin.buildModelFromXML(build_urdf(kind))  # type: ignore[arg-type]
+        model = pin.buildModelFromXML(build_urdf(kind))
     return JointLimits(
         np.array(model.lowerPositionLimit, dtype=float),
         np.array(model.upperPositionLimit, dtype=float),

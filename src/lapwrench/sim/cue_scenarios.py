@@ -32,7 +32,7 @@ import numpy as np
 from lapwrench.config import Config
 from lapwrench.sim.hard_push import ConstantPush
 from lapwrench.sim.loop import ClosedLoop, Trace
-from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, run_metrics
+from lapwrench.sim.results import DEFAULT_OPTIONS, Run, ScenarioOptions, ScenarioResult, number, run_metrics
 from lapwrench.sim.scene.build import build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.world import CONTROL_DT, SimWorld
@@ -148,8 +148,8 @@ def zoom(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
     runs = [zoom_run("with zoom", with_cfg, opts, params.band), zoom_run("without zoom", without_cfg, opts,
                                                                           params.band)]
     w, wo = runs[0].metrics, runs[1].metrics
-    frac = w["in_band_fraction"]
-    frac = None if frac is None or math.isnan(frac) else frac  # type: ignore[arg-type]
+    share = w["in_band_fraction"]  # NaN (a float) without any tracking time
+    frac = share if isinstance(share, float) and not math.isnan(share) else None
     return ScenarioResult(
         "zoom",
         runs,
@@ -207,8 +207,10 @@ def keep_out_cases(cfg: Config, push_s: float) -> list[KeepOutCase]:
     side -= (side @ d_z) * d_z
     side /= np.linalg.norm(side)
     centre = p_C - side * (SPHERE_RADIUS + SPHERE_GAP)  # the tip moves to -side under a +side push
-    sphere = {"shape": "sphere", "center": [float(x) for x in centre], "radius": SPHERE_RADIUS}
-    plane = {"shape": "plane", "point": [float(x) for x in p_C + PLANE_GAP * d_z], "normal": [float(x) for x in -d_z]}
+    sphere: dict[str, object] = {"shape": "sphere", "center": [float(x) for x in centre], "radius": SPHERE_RADIUS}
+    plane: dict[str, object] = {
+        "shape": "plane", "point": [float(x) for x in p_C + PLANE_GAP * d_z], "normal": [float(x) for x in -d_z]
+    }
     lateral = ConstantPush("lateral", side, PUSH_N, GRIP_FORCE, push_s)
     axial = ConstantPush("axial", d_z, PUSH_N, GRIP_FORCE, push_s)
     return [
@@ -250,9 +252,9 @@ def keep_out(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioRe
         runs,
         {
             "push_N": PUSH_N,
-            "distance_min_mm": min(float(m["distance_min_mm"]) for m in with_cue),  # type: ignore[arg-type]
-            "distance_min_without_cue_mm": min(float(m["distance_min_mm"]) for m in without),  # type: ignore[arg-type]
-            "rcm_error_max_mm": max(float(m["rcm_error_max_mm"]) for m in with_cue),  # type: ignore[arg-type]
+            "distance_min_mm": min(number(m, "distance_min_mm") for m in with_cue),
+            "distance_min_without_cue_mm": min(number(m, "distance_min_mm") for m in without),
+            "rcm_error_max_mm": max(number(m, "rcm_error_max_mm") for m in with_cue),
             "target_met": not any(m["entered_zone"] for m in with_cue),
             "entered_without_cue": all(bool(m["entered_zone"]) for m in without),
         },
@@ -317,11 +319,11 @@ def report_lines(name: str, res: ScenarioResult, figures: list[str]) -> list[str
         cells = ((m["in_band_fraction"], m["spread_min"], m["spread_max"]) if name == "zoom"
                  else (m["distance_start_mm"], m["distance_min_mm"], m["entered_zone"]))
         L.append(f"| {run.label} | " + " | ".join(_fmt(c) for c in cells) + f" | {_fmt(m['rcm_error_max_mm'])} |")
-    m = res.metrics
-    target = (f"Target: spread in the band {m['band']} at least {ZOOM_TARGET:.0%} of the tracking time"
+    summary = res.metrics
+    target = (f"Target: spread in the band {summary['band']} at least {ZOOM_TARGET:.0%} of the tracking time"
               if name == "zoom" else f"Target: the tip never enters the zone under a {PUSH_N:.0f} N push")
-    L += ["", f"{target}. Met: **{m['target_met']}**."]
+    L += ["", f"{target}. Met: **{summary['target_met']}**."]
     if name == "keep-out":
-        L.append(f"Without the cue the tip enters the zone in every run: **{m['entered_without_cue']}**.")
+        L.append(f"Without the cue the tip enters the zone in every run: **{summary['entered_without_cue']}**.")
     L.append("")
     return L + [f"![{name}]({f})" for f in figures] + [""]

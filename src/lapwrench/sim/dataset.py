@@ -208,10 +208,10 @@ class FrameLabeller:
             info["blur_sigma"] = s
         if rng.uniform() < cfg.motion_blur_prob:
             n = int(rng.integers(5, 12))
-            k = np.zeros((n, n), np.float32)
-            k[n // 2, :] = 1.0 / n
+            line = np.zeros((n, n), np.float32)
+            line[n // 2, :] = 1.0 / n
             rot = cv2.getRotationMatrix2D(((n - 1) / 2.0, (n - 1) / 2.0), float(rng.uniform(0, 180)), 1.0)
-            k = cv2.warpAffine(k, rot, (n, n))
+            k: np.ndarray = cv2.warpAffine(line, rot, (n, n))  # float32, as the line
             k /= max(float(k.sum()), 1e-6)
             img = cv2.filter2D(img, -1, k)
             info["motion_blur_px"] = n

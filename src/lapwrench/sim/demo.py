@@ -34,7 +34,7 @@ from lapwrench.sim.demo_tasks import (
     run_tasks,
     stop_signals,
 )
-from lapwrench.sim.results import ScenarioResult
+from lapwrench.sim.results import ScenarioResult, number
 from lapwrench.sim.scenarios import FRANKA_TUNED, SCENARIOS, SIM_SECONDS, scenarios_for
 from lapwrench.sim.world import CONTROL_DT
 
@@ -88,7 +88,8 @@ def plan_demo(
             base, tracking = (c.replace(robot={"kind": robot}) for c in (base, tracking))
     except config_mod.ConfigError as exc:
         raise DemoError(str(exc)) from exc
-    kind, skipped = base.robot.kind, ()
+    kind = base.robot.kind
+    skipped: tuple[str, ...] = ()
     if tracking.robot.kind != kind:
         raise DemoError(f"the configs name two robots ({kind}, {tracking.robot.kind}); use --robot to pick one")
     if not scenarios:
@@ -193,8 +194,12 @@ def _run_demo(plan: DemoPlan, progress: bool, signals: StopSignals) -> dict[str,
         raise exc
     bar.update(max(0.0, bar.total - bar.n))
     bar.close()
-    results = {n: done[n] for n in plan.scenarios}
-    figures = {n: _plots(n, r, out, plan.configs[n]) for n, r in results.items()}  # type: ignore[arg-type]
+    results: dict[str, ScenarioResult] = {}
+    for n in plan.scenarios:
+        r = done[n]
+        assert isinstance(r, ScenarioResult)  # a scenario's; the printed-damping check alone gives a text
+        results[n] = r
+    figures = {n: _plots(n, r, out, plan.configs[n]) for n, r in results.items()}
     check = done.get(PRINTED_DAMPING)
     wall = time.perf_counter() - t0
     meta = {
@@ -208,14 +213,14 @@ def _run_demo(plan: DemoPlan, progress: bool, signals: StopSignals) -> dict[str,
         "config_sources": plan.config_sources,
         "wall_s": wall,
         "workers": plan.workers,
-        "sim_s": sum(sum(float(r.metrics["duration_s"]) for r in res.runs) for res in results.values()),  # type: ignore[union-attr]
-        "instrument_source": _instrument_sources(results),  # type: ignore[arg-type]
+        "sim_s": sum(sum(number(r.metrics, "duration_s") for r in res.runs) for res in results.values()),
+        "instrument_source": _instrument_sources(results),
         "printed_damping_check": check,
         "notes": report.demo_notes(plan.time_scale, plan.robot, plan.skipped),
     }
-    report.write_metrics(out, results, meta)  # type: ignore[arg-type]
-    report.write_report(out, results, meta, figures)  # type: ignore[arg-type]
-    return results  # type: ignore[return-value]
+    report.write_metrics(out, results, meta)
+    report.write_report(out, results, meta, figures)
+    return results
 
 
 def _write_failed(out: Path, exc: BaseException) -> None:

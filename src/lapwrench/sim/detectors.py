@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.config import Config
-from lapwrench.perception.detection import Detection, Detector
+from lapwrench.perception.detection import Detection, Detector, DetectorConfig
 from lapwrench.sim.world import SimWorld
 
 DETECTION_SCORE = 0.5  # operating threshold of the detector in the simulated runs
@@ -28,6 +28,7 @@ class ProjectedInstruments:
         self.world = world
         self.width = width
         self.height = height
+        self.config = DetectorConfig(frame_size=(width, height))  # the frames it is handed (and ignores)
 
     def detect(self, image: np.ndarray) -> list[Detection]:
         tips = np.array([self.world.instrument_tip(i) for i in range(self.world.n_instruments)])
@@ -50,8 +51,8 @@ def make_detector(spec: str, world: SimWorld, cfg: Config, threads: int | None =
     run competing with the other runs' cores.
     """
     if spec == "projected":
-        det = ProjectedInstruments(world, cfg.camera.width, cfg.camera.height)
-        return det, det.name
+        projected = ProjectedInstruments(world, cfg.camera.width, cfg.camera.height)
+        return projected, projected.name
     from lapwrench import perception
 
     # One instrument per port: keep that many of the most confident detections above 0.5.

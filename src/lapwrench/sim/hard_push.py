@@ -31,13 +31,13 @@ import math
 import time
 from collections import Counter
 from dataclasses import dataclass
-from typing import Literal, Protocol
+from typing import Literal, Protocol, TypedDict
 
 import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError, Trace
-from lapwrench.sim.results import Run, ScenarioOptions, ScenarioResult, run_metrics
+from lapwrench.sim.results import Metric, Run, ScenarioOptions, ScenarioResult, number, run_metrics
 from lapwrench.sim.surgeon import SpeedDrivenHand, across_shaft, axis_angle
 from lapwrench.sim.variation import WorldVariation
 from lapwrench.sim.world import CONTROL_DT, SimulationUnstableError, SimWorld
@@ -55,6 +55,15 @@ TARGET_RCM_MM = 2.0
 TARGET_FORCE_N = 10.0
 
 Kind = Literal["lateral", "axial", "speed", "roll"]
+
+
+class _Stop(TypedDict, total=False):
+    """How a run ended early (empty: it did not): a safety hold or a simulation stop."""
+
+    kind: str
+    time: float
+    reason: str
+    after: tuple[float, float, float, float]  # a hold's: RCM error (m), trocar force (N), tilt (deg), tip depth (m)
 
 
 @dataclass(frozen=True)
@@ -81,10 +90,11 @@ class PushCase:
 def default_cases() -> list[PushCase]:
     """The full set: 12 lateral, 12 axial, 3 speed-driven, 1 roll (28 runs)."""
     cases = []
-    for kind, dirs in (
+    pushes: tuple[tuple[Kind, tuple[tuple[str, tuple[float, float, float]], ...]], ...] = (
         ("lateral", (("+x_E", (1.0, 0.0, 0.0)), ("+y_E", (0.0, 1.0, 0.0)))),
         ("axial", (("in", (0.0, 0.0, 1.0)), ("out", (0.0, 0.0, -1.0)))),
-    ):
+    )
+    for kind, dirs in pushes:
         for name, axis in dirs:
             for force in FORCES_N:
                 for delta in GRIP_FORCE:
@@ -203,7 +213,7 @@ def run_case(cfg: Config, case: PushCase, opts: ScenarioOptions, push_s: float, 
     watch.depth0 = watch.tip_depth(world)
     hand = make_hand(case, world, push_s, opts.world)
     trace = Trace()
-    stop: dict[str, object] = {}
+    stop: _Stop = {}
     reported = 0.0
     t0 = time.perf_counter()
     try:
@@ -244,10 +254,10 @@ def run_case(cfg: Config, case: PushCase, opts: ScenarioOptions, push_s: float, 
 
 
 def _metrics(
-    loop: ClosedLoop, trace: Trace, wall: float, watch: _Watch, stop: dict[str, object], case: PushCase
-) -> dict[str, object]:
+    loop: ClosedLoop, trace: Trace, wall: float, watch: _Watch, stop: _Stop, case: PushCase
+) -> dict[str, Metric]:
     """Physical metrics of one run (mm, N, deg), the envelope hits and the alarm."""
-    m: dict[str, object] = {
+    m: dict[str, Metric] = {
         "kind": case.kind,
         "magnitude": case.magnitude,
         "delta_nominal": case.delta,
@@ -256,7 +266,7 @@ def _metrics(
     rcm, force, tilt, depth = [], [], [0.0], [watch.depth0]
     if "t" in trace:
         m.update(run_metrics(loop, trace, wall))
-        rcm, force = [float(m["rcm_error_max_mm"])], [float(m["trocar_force_max_N"])]  # type: ignore[arg-type]
+        rcm, force = [number(m, "rcm_error_max_mm")], [number(m, "trocar_force_max_N")]
         tilt.append(float(trace["tilt_deg"].max()))
         depth += [float(trace["tip_depth"].min()), float(trace["tip_depth"].max())]
         tip = trace["tip_depth"]
@@ -269,10 +279,10 @@ def _metrics(
         m.update({"duration_s": 0.0, "references_inside_limits": None, "delta_mean": None, "depth_rate_end_mm_s": None})
     after = stop.pop("after", None)
     if after is not None:  # the state once the hold brought the arm to rest
-        rcm.append(after[0] * 1e3)  # type: ignore[index]
-        force.append(after[1])  # type: ignore[index]
-        tilt.append(after[2])  # type: ignore[index]
-        depth.append(after[3])  # type: ignore[index]
+        rcm.append(after[0] * 1e3)
+        force.append(after[1])
+        tilt.append(after[2])
+        depth.append(after[3])
     m["rcm_error_max_mm"] = max(rcm, default=None)
     m["trocar_force_max_N"] = max(force, default=None)
     m["tilt_max_deg"] = max(tilt)
@@ -307,6 +317,12 @@ def evaluate(m: dict, cfg: Config) -> dict[str, bool | str]:
     return {**ok, "passed": not failed, "failed_targets": ", ".join(failed)}
 
 
+def _still_moving(m: dict[str, Metric]) -> bool:
+    """Whether the tip's depth still changed at the end of the run (its rate is None after a stop: at rest)."""
+    rate = m.get("depth_rate_end_mm_s")
+    return isinstance(rate, float) and abs(rate) > STILL_MOVING_MM_S
+
+
 def targets(cfg: Config) -> dict[str, float]:
     """The issue's targets in report units."""
     return {
@@ -334,9 +350,7 @@ def hard_push(cfg: Config, opts: ScenarioOptions | None = None, cases: list[Push
             "runs": len(runs),
             "passed": sum(bool(m["passed"]) for m in ms),
             "alarms": sum(m["alarm"] is not None for m in ms),
-            "still_moving": [
-                r.label for r in runs if abs(r.metrics.get("depth_rate_end_mm_s") or 0.0) > STILL_MOVING_MM_S
-            ],
+            "still_moving": [r.label for r in runs if _still_moving(r.metrics)],
             "all_references_inside_limits": all(bool(m["references_inside_limits"]) for m in ms),
             "worst": worst,
             "targets": targets(cfg),

@@ -84,6 +84,7 @@ class Trace:
 
 
 CycleObserver = Callable[["ClosedLoop", Cycle], None]
+FrameObserver = Callable[["ClosedLoop", np.ndarray, float], None]  # an observer's optional ``frame`` method
 _OBSERVERS: list[CycleObserver] = []
 
 
@@ -154,7 +155,9 @@ class ClosedLoop:
             self.model.limits, CONTROL_DT, SupervisorConfig.from_config(cfg, max_consecutive_misses=0)
         )
         observers = list(_OBSERVERS)
-        self._frame_observers = [f.frame for f in observers if callable(getattr(f, "frame", None))]
+        self._frame_observers: list[FrameObserver] = [
+            frame for f in observers if callable(frame := getattr(f, "frame", None))
+        ]
         latency_s = self.variation.detector_latency_s if detection_latency is None else detection_latency
         # Frames drawn in a child process while the loop steps on (see _camera_step): not for a
         # measured latency (known only once detected) nor for live telemetry (it reads the loop's state).
@@ -172,6 +175,7 @@ class ClosedLoop:
             if v.detector_corrupted:
                 det = CorruptedDetector(det, v.detector_dropout, v.detector_noise_px, seed=s_det)
                 self.detector_name += v.describe_detector()
+            assert self.camera is not None  # built whenever there is a detector
             self.detection = SimulatedAsyncDetector(det, frame_rate=self.camera.fps, latency=latency_s)
         self.on_frame = on_frame
         self.last_mode = "idle"
@@ -184,10 +188,14 @@ class ClosedLoop:
         self._pending: PendingFrame | None = None
         self._hold = frame_hold(self.camera.fps if self.camera else 1.0, latency_s, self._detect_at_capture
                                  or detector is None)
+
+        def notify(c: Cycle) -> None:
+            for f in observers:
+                f(self, c)
+
         self.loop = ControlLoop(
             self.robot, self.controller, self.supervisor, self._sources(), clock=lambda: self.t,
-            wall_deadlines=False, switch_interval=None,
-            on_cycle=(lambda c: [f(self, c) for f in observers]) if observers else None,
+            wall_deadlines=False, switch_interval=None, on_cycle=notify if observers else None,
         )
         self._reading = self.loop.start()
         self.q0 = self._reading.q
@@ -241,6 +249,7 @@ class ClosedLoop:
             self._deliver_frame()
         if cam.offscreen is None:  # drawn now (or not drawn at all: the clock alone)
             if cam.capture(t):
+                assert cam.frame is not None  # set by a capture (NO_IMAGE when the camera does not draw)
                 self._publish(cam.frame, t, self.last_mode, detect=True)
             return
         if not cam.begin(t):

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from lapwrench.config import Config
-from lapwrench.sim.results import ScenarioResult
+from lapwrench.sim.results import ScenarioResult, number
 from lapwrench.sim.video import annotate_frame
 
 MODES = ["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
@@ -173,7 +173,7 @@ def plot_hard_push(res: ScenarioResult, out: Path) -> list[str]:
     tg: dict[str, float] = res.metrics["targets"]  # type: ignore[assignment]
     ax[0].axhline(tg["rcm_error_max_mm"], ls=":", c="r", lw=1)
     ax[1].axhline(tg["trocar_force_max_N"], ls=":", c="r", lw=1)
-    d0 = float(res.runs[0].metrics["tip_depth_start_mm"]) if res.runs else 0.0  # type: ignore[arg-type]
+    d0 = number(res.runs[0].metrics, "tip_depth_start_mm") if res.runs else 0.0
     for k in ("tip_depth_min_mm", "tip_depth_max_mm"):
         ax[2].axhline(tg[k] - d0, ls=":", c="r", lw=1)
     ax[0].set(xlabel="time (s)", ylabel="physical RCM error (mm)", title="RCM error (target dotted)")

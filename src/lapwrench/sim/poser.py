@@ -7,13 +7,14 @@ on the flange pose, from the scene's default configuration, inside the joint lim
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import cv2
 import numpy as np
 
 
-def _rotvec_matrix(rv: np.ndarray) -> np.ndarray:
+def _rotvec_matrix(rv: Sequence[float] | np.ndarray) -> np.ndarray:
     R, _ = cv2.Rodrigues(np.asarray(rv, np.float64).reshape(3, 1))
     return R
 

@@ -78,20 +78,22 @@ def write_report(out: Path, results: dict[str, ScenarioResult], meta: dict, figu
     for name, title in (("needle-search", "Needle search (paper Fig. 6-7)"), ("workflow", "Workflow (paper Fig. 9)")):
         if name not in results:
             continue
-        m = results[name].metrics
+        sm = results[name].metrics  # the run's metrics and its mode timeline (scenarios._scripted_run)
+        timeline = sm["mode_timeline"]
+        assert isinstance(timeline, list)
         L += [f"## {title}", ""]
         L += [
-            f"RCM error max {_fmt(m['rcm_error_max_mm'])} mm (RMS {_fmt(m['rcm_error_rms_mm'])}), trocar force max "
-            f"{_fmt(m['trocar_force_max_N'])} N, tracking error median {_fmt(m.get('tracking_error_median_px'))} px "
-            f"(p90 {_fmt(m.get('tracking_error_p90_px'))}), instrument visible "
-            f"{_fmt(m.get('instrument_visible_fraction'))} of the time, insertion drift "
-            f"{_fmt(m['insertion_drift_mm'])} mm, references inside the Franka limits: "
-            f"**{m['references_inside_limits']}**, real-time factor {_fmt(m['real_time_factor'])}. "
-            f"Control loop (the one that drives the robot): compute p50 {_fmt(m.get('loop_compute_p50_us'))} µs, "
-            f"p99 {_fmt(m.get('loop_compute_p99_us'))} µs, {m.get('loop_over_budget_cycles', 'n/a')} cycles over "
+            f"RCM error max {_fmt(sm['rcm_error_max_mm'])} mm (RMS {_fmt(sm['rcm_error_rms_mm'])}), trocar force max "
+            f"{_fmt(sm['trocar_force_max_N'])} N, tracking error median {_fmt(sm.get('tracking_error_median_px'))} px "
+            f"(p90 {_fmt(sm.get('tracking_error_p90_px'))}), instrument visible "
+            f"{_fmt(sm.get('instrument_visible_fraction'))} of the time, insertion drift "
+            f"{_fmt(sm['insertion_drift_mm'])} mm, references inside the Franka limits: "
+            f"**{sm['references_inside_limits']}**, real-time factor {_fmt(sm['real_time_factor'])}. "
+            f"Control loop (the one that drives the robot): compute p50 {_fmt(sm.get('loop_compute_p50_us'))} µs, "
+            f"p99 {_fmt(sm.get('loop_compute_p99_us'))} µs, {sm.get('loop_over_budget_cycles', 'n/a')} cycles over "
             "the 800 µs budget (wall clock, reported; the simulated robot waits for the loop).",
             "",
-            "Mode sequence: " + " → ".join(_compress_modes(m["mode_timeline"])),
+            "Mode sequence: " + " → ".join(_compress_modes(timeline)),
             "",
         ]
         L += [f"![{name}]({f})" for f in figures.get(name, [])] + [""]

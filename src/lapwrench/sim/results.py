@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +19,8 @@ from lapwrench.sim.loop import ClosedLoop, Trace
 from lapwrench.sim.variation import WorldVariation
 from lapwrench.sim.world import CONTROL_DT
 
+Metric = float | str | None  # one metric of a run: a number, a text (its kind, an alarm), None (not defined)
+
 
 @dataclass
 class Run:
@@ -26,7 +28,15 @@ class Run:
 
     label: str
     trace: Trace
-    metrics: dict[str, float | str | None]
+    metrics: dict[str, Metric]
+
+
+def number(metrics: Mapping[str, Metric], key: str) -> float:
+    """The metric ``key`` as a float; TypeError if it holds text or None (not defined in this run)."""
+    v = metrics[key]
+    if v is None or isinstance(v, str):
+        raise TypeError(f"metric {key!r} is not a number: {v!r}")
+    return float(v)
 
 
 @dataclass
@@ -74,13 +84,13 @@ def loop_compute_metrics(loop: ClosedLoop) -> dict[str, float | int]:
     }
 
 
-def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | None = None) -> dict:
+def run_metrics(loop: ClosedLoop, trace: Trace, wall: float, track_index: int | None = None) -> dict[str, Metric]:
     """Physical metrics of one run."""
     F = np.linalg.norm(trace["contact_force"], axis=1)
     phys = trace["rcm_error_phys"] * 1e3
     usage = limit_usage(trace["q_ref"], CONTROL_DT, loop.model.limits, loop.q0)
     sim_time = float(trace["t"][-1] + CONTROL_DT)
-    m: dict[str, float | str | None] = {
+    m: dict[str, Metric] = {
         "duration_s": sim_time,
         "rcm_error_max_mm": float(phys.max()),
         "rcm_error_rms_mm": float(np.sqrt(np.mean(phys**2))),

@@ -16,6 +16,7 @@ scripted hand scales with it.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -56,6 +57,7 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
 
     ``time_scale`` < 1 shortens the adjustment to 10° x time_scale."""
     runs = []
+    times: list[float | None] = []  # completion times, None: not completed
     levels = [("high", 30.0), ("medium", 17.0), ("low", 5.0)]
     limit = 60.0 * opts.time_scale
     for label, grip_force in levels:
@@ -76,15 +78,15 @@ def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult
         m["delta_mean"] = float(delta[delta > 0].mean()) if np.any(delta > 0) else 0.0
         m["completion_time_s"] = hand.done_time
         runs.append(Run(label, trace, m))
-    times = [r.metrics["completion_time_s"] for r in runs]
-    done = all(t is not None for t in times)
+        times.append(hand.done_time)
+    done = [t for t in times if t is not None]
     return ScenarioResult(
         "grip",
         runs,
         {
             "completion_time_s": times,
             "delta_mean": [r.metrics["delta_mean"] for r in runs],
-            "completion_falls_as_delta_rises": bool(done and times[0] < times[1] < times[2]),
+            "completion_falls_as_delta_rises": len(done) == len(times) and done[0] < done[1] < done[2],
             "paper": PAPER["grip"],
         },
     )
@@ -97,6 +99,8 @@ def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Sce
     """10 mm (``world.incision_shift_mm``) housing shift at t = 3.6 s with and without RCM
     adaptation; ΔF(t) both ways."""
     runs = []
+    back_s: list[float | None] = []  # s after the load until the force is back below 5 N (None: never)
+    final_N: list[float] = []
     duration = max(6.0, 12.0 * opts.time_scale)
     dist = HousingDisturbance(start=3.6, shift=(0.0, opts.world.incision_shift_mm / 1000.0))
     for label, enabled in (("with adaptation", True), ("without adaptation", False)):
@@ -104,8 +108,9 @@ def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Sce
         park_instruments(loop.world)
         trace = Trace()
         t0 = time.perf_counter()
+        disturb = functools.partial(dist.apply, loop.world)
         while loop.t < duration:
-            res = loop.step(0.0, before_physics=lambda t, loop=loop: dist.apply(loop.world, t))
+            res = loop.step(0.0, before_physics=disturb)
             loop.record(trace, res, residual_lateral=res.residual_lateral)
             if opts.progress and round(loop.t * 1000) % 100 == 0:
                 opts.progress(0.1)
@@ -119,22 +124,20 @@ def rcm_disturbance(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> Sce
             back = float(t[above[-1]] + CONTROL_DT - dist.start)
         m["force_back_below_5N_after_s"] = back
         m["force_final_N"] = float(F[-1])
+        back_s.append(back)
+        final_N.append(float(F[-1]))
         m["force_peak_after_load_N"] = float(F[after].max())
         m["rcm_shift_mm"] = float(np.linalg.norm(trace["p_R"][-1] - trace["p_R"][0]) * 1e3)
         runs.append(Run(label, trace, m))
-    w, wo = runs[0].metrics, runs[1].metrics
+    w_back = back_s[0]  # runs[0]: with adaptation, runs[1]: without
     return ScenarioResult(
         "rcm-disturbance",
         runs,
         {
-            "with_adaptation_back_below_5N_s": w["force_back_below_5N_after_s"],
-            "with_adaptation_final_N": w["force_final_N"],
-            "without_adaptation_final_N": wo["force_final_N"],
-            "target_met": bool(
-                w["force_back_below_5N_after_s"] is not None
-                and w["force_back_below_5N_after_s"] <= 3.0
-                and wo["force_final_N"] > 5.0
-            ),
+            "with_adaptation_back_below_5N_s": w_back,
+            "with_adaptation_final_N": final_N[0],
+            "without_adaptation_final_N": final_N[1],
+            "target_met": bool(w_back is not None and w_back <= 3.0 and final_N[1] > 5.0),
             "paper": PAPER["rcm-disturbance"],
         },
     )
@@ -177,7 +180,7 @@ def _scripted_run(cfg: Config, opts: ScenarioOptions, script: Script) -> Scenari
             writer.close()
     m = run_metrics(loop, trace, time.perf_counter() - t0, script.track_index)
     modes = list(trace["mode"])
-    timeline = []
+    timeline: list[tuple[float, str]] = []
     for k, mode in enumerate(modes):
         if not timeline or timeline[-1][1] != mode:
             timeline.append((float(trace["t"][k]), mode))

@@ -61,10 +61,15 @@ def park_instruments(world: SimWorld) -> None:
 class Script(Protocol):
     """What the scenarios and the UI step: ``script(world, t)`` per tick (module docstring)."""
 
-    name: str
-    duration: float  # s of script time it runs for (inf: until :meth:`done`)
-    track_index: int  # the instrument the camera is meant to follow
-    moves_instruments: bool  # whether it places the instruments (the UI then leaves them alone)
+    # read-only: a class constant, an attribute or a property of the script
+    @property
+    def name(self) -> str: ...
+    @property
+    def duration(self) -> float: ...  # s of script time it runs for (inf: until :meth:`done`)
+    @property
+    def track_index(self) -> int: ...  # the instrument the camera is meant to follow
+    @property
+    def moves_instruments(self) -> bool: ...  # whether it places the instruments (the UI then leaves them alone)
 
     def __call__(self, world: SimWorld, t: float) -> float: ...
 

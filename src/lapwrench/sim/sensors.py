@@ -19,6 +19,7 @@ calls; the F/T sensor reads its six sensor values through cached addresses.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -286,7 +287,7 @@ class ExternalForceObserver:
         self._data = model.model.createData()
         self._lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         self._lower = np.tril_indices(n, -1)
-        self._step = None  # the kernel bound to its argument types at the first update
+        self._step: Callable[..., bool] | None = None  # _observer_step bound to its argument types at the first update
         # Compile the tick (or load it from numba's cache) now, not in the first reading.
         self.update(pin.neutral(model.model), np.zeros(n), np.zeros(n), 1e-3)
         self.reset()
@@ -310,7 +311,7 @@ class ExternalForceObserver:
         g = np.ascontiguousarray(pin.computeGeneralizedGravity(m, d, q))
         J = np.ascontiguousarray(pin.computeFrameJacobian(m, d, q, self.model.frame_E, self._lwa))
         first = self._p0 is None
-        if first:
+        if self._p0 is None:
             self._p0 = np.empty(nv)
         r_new = np.empty(nv)
         force = np.empty(3)

@@ -17,6 +17,7 @@ The F/T sensor measures whatever the hand applies.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,7 +105,7 @@ class HandGuide:
         return self.grip_force
 
 
-def rotate_axis(axis: np.ndarray, about: np.ndarray, angle_deg: float) -> np.ndarray:
+def rotate_axis(axis: np.ndarray, about: Sequence[float] | np.ndarray, angle_deg: float) -> np.ndarray:
     """``axis`` rotated by ``angle_deg`` about ``about`` (Rodrigues)."""
     k = np.asarray(about, float) / np.linalg.norm(about)
     a = math.radians(angle_deg)

@@ -206,8 +206,11 @@ class Controls:
                 shown = gui.add_checkbox(f"show {name} instrument", False)
                 x = gui.add_slider(f"{name} x (m)", -r, r, 0.002, 0.0)
                 y = gui.add_slider(f"{name} y (m)", -r, r, 0.002, 0.0)
-                update = self.guarded(lambda _e, i=i, s=shown, x=x, y=y: self.session.set_instrument(
-                    i, s.value, x.value, y.value))
+
+                def place(_e: Any, i: int = i, s: Any = shown, x: Any = x, y: Any = y) -> None:
+                    self.session.set_instrument(i, s.value, x.value, y.value)
+
+                update = self.guarded(place)
                 for h in (shown, x, y):
                     h.on_update(update)
                 self.instrument_inputs.append((shown, x, y))
@@ -226,7 +229,11 @@ class Controls:
             self.reset = gui.add_button("Reset")
         self.shift.on_update(self.guarded(lambda e: self.session.set_disturbance(bool(e.target.value))))
         for name, button in self.play.items():
-            button.on_click(self.guarded(lambda _e, name=name: self.session.play(name)))
+
+            def play(_e: Any, name: str = name) -> None:
+                self.session.play(name)
+
+            button.on_click(self.guarded(play))
         self.stop_script.on_click(self.guarded(lambda _e: self.session.stop_script()))
         self.pause.on_click(self.guarded(lambda _e: self._toggle_pause()))
         self.reset.on_click(self.guarded(lambda _e: self._in_background(self._reset)))

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Literal, NamedTuple
 
 import numpy as np
 
 from lapwrench.config import CameraConfig, Config, TrackingConfig
 from lapwrench.jit import kernel
-from lapwrench.shaping import sine_ramp
+from lapwrench.shaping import RampVariant, sine_ramp
 from lapwrench.spatial import Mat, Vec, Wrench, cross3, inner
 from lapwrench.wrenches.base import Cue, TickContext
+
+TrackingDirection = Literal["printed", "image_plane"]  # tracking.direction
 
 
 class TrackingParams(NamedTuple):
@@ -25,8 +27,8 @@ class TrackingParams(NamedTuple):
     epsilon2: float
     F_max: float
     F_sum_max: float
-    ramp: str
-    direction: str
+    ramp: RampVariant
+    direction: TrackingDirection
 
     @staticmethod
     def from_config(camera: CameraConfig, cfg: TrackingConfig) -> TrackingParams:
@@ -64,7 +66,7 @@ def unit_depth_ray(u: float, v: float, p: TrackingParams, R_C: Mat) -> Vec:
 
 
 @kernel
-def tracking_direction(ray: Vec, z_C: Vec, variant: str = "printed") -> Vec:
+def tracking_direction(ray: Vec, z_C: Vec, variant: TrackingDirection = "printed") -> Vec:
     """Eq (12): V_i = ((z_C x P'_i) x P'_i) / ‖·‖.
 
     As printed, V_i is perpendicular to the ray P'_i (in the plane of z_C and P'_i): its

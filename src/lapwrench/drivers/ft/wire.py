@@ -176,4 +176,4 @@ def unpack_record(data: bytes) -> FTRecord:
             raise PacketError("received a request packet (header 0x1234) where a record was expected")
         raise PacketError(f"record of {n} bytes, expected {RECORD_SIZE}")
     seq, ft_seq, status, *counts = _RECORD.unpack(data)
-    return FTRecord(seq, ft_seq, status, tuple(counts))  # type: ignore[arg-type]
+    return FTRecord(seq, ft_seq, status, tuple(counts))

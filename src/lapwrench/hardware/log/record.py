@@ -22,7 +22,9 @@ def plain_list(x: Any) -> Any:
     finite = np.isfinite(a)
     if finite.all():
         return a.tolist()
-    return np.where(finite, a, None).tolist()
+    out = a.astype(object)  # Python floats, and None in place of the others
+    out[~finite] = None
+    return out.tolist()
 
 
 def plain_float(x: Any) -> float | None:

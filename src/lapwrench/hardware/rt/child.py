@@ -242,7 +242,7 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
             robot,
             ctrl,
             sup,
-            sources,  # type: ignore[arg-type]
+            sources,
             ages=spec.ages,
             logger=sink,  # type: ignore[arg-type]
             pre_cycle=hooks.before_tick,

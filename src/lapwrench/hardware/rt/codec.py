@@ -62,7 +62,7 @@ _DOUBLES = tuple(struct.Struct(f"{n}d") for n in range(max(_HEAD, _TELEMETRY_PLA
 """``_DOUBLES[n]`` packs n native float64 values (:func:`_put_values`)."""
 
 
-def _put_values(view: memoryview, row: np.ndarray, o: int, values: tuple[Any, ...]) -> None:
+def _put_values(view: memoryview[float], row: np.ndarray, o: int, values: tuple[Any, ...]) -> None:
     """Plain values (floats, ints, bools) into ``row[o : o + len(values)]`` (``view`` is ``memoryview(row)``).
 
     One ``struct`` call packs them all as float64, a fraction of what a numpy item assignment costs
@@ -74,7 +74,7 @@ def _put_values(view: memoryview, row: np.ndarray, o: int, values: tuple[Any, ..
         row[o : o + len(values)] = values
 
 
-def _put_vector(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> None:
+def _put_vector(view: memoryview[float], row: np.ndarray, o: int, n: int, v: Any) -> None:
     """``v``'s ``n`` values into ``row[o : o + n]`` (``view`` is ``memoryview(row)``).
 
     What the loop hands over is a float64 array: the memoryview copies it as it is, in a third to a half
@@ -87,7 +87,7 @@ def _put_vector(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> No
         row[o : o + n] = v
 
 
-def _put_optional(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> None:
+def _put_optional(view: memoryview[float], row: np.ndarray, o: int, n: int, v: Any) -> None:
     """An optional vector at ``o``: its presence flag (0 for ``None``, which writes nothing else, 1), then its
     ``n`` values (:func:`_put_vector`)."""
     if v is None:
@@ -97,7 +97,7 @@ def _put_optional(view: memoryview, row: np.ndarray, o: int, n: int, v: Any) -> 
         _put_vector(view, row, o + 1, n, v)
 
 
-def _put_points(view: memoryview, row: np.ndarray, o: int, points: Any) -> None:
+def _put_points(view: memoryview[float], row: np.ndarray, o: int, points: Any) -> None:
     """The instrument points at ``o``: their number (-1 for ``None``), then x, y of each (the values in
     order, whatever the shape); at most :data:`~lapwrench.hardware.rt.sizes.MAX_POINTS`, the first ones."""
     if points is None:
@@ -169,7 +169,8 @@ class CycleCodec:
         nj = len(r.q)
         if nj > MAX_JOINTS:
             raise ValueError(f"a cycle row holds at most {MAX_JOINTS} joints, the record has {nj}")
-        view = memoryview(row)
+        # a view of float64 places; numpy's stubs give arrays the buffer protocol only from Python 3.12 on
+        view: memoryview[float] = memoryview(row)  # type: ignore[arg-type]
         self._encode_wrenches(view, row, r.wrenches)  # before the telemetry: their names share a table
         mode, state, measured = self._modes.get(r.mode), self._states.get(r.supervisor), r.rcm_error_measured
         _put_values(view, row, 0, (
@@ -192,7 +193,7 @@ class CycleCodec:
         _put_vector(view, row, _Q_CMD, nj, r.q_cmd)
         self._encode_telemetry(view, row, r.telemetry)
 
-    def _encode_wrenches(self, view: memoryview, row: np.ndarray, wrenches: dict[str, Any]) -> None:
+    def _encode_wrenches(self, view: memoryview[float], row: np.ndarray, wrenches: dict[str, Any]) -> None:
         """The first :attr:`N_WRENCH` wrenches, each its interned name and 6 values; -2 (none) in the
         name of every slot left."""
         names = self._names
@@ -207,7 +208,7 @@ class CycleCodec:
         for free in range(s, end, _WRENCH_SLOT):
             view[free] = -2.0
 
-    def _encode_telemetry(self, view: memoryview, row: np.ndarray, telemetry: dict[str, Any] | None) -> None:
+    def _encode_telemetry(self, view: memoryview[float], row: np.ndarray, telemetry: dict[str, Any] | None) -> None:
         """Each cue's interned name, value count and values (:func:`_put_values`), then the end mark (-2);
         cut at the row's room."""
         names = self._names

@@ -26,7 +26,7 @@ def franka_factory(
 
     return FrankaRobot(
         robot_ip,
-        kind=kind,  # type: ignore[arg-type]
+        kind=kind,
         realtime=realtime,  # type: ignore[arg-type]
         ext_wrench_sign=ext_wrench_sign,  # type: ignore[arg-type]
         report_external_force=report_external_force,
