@@ -149,7 +149,7 @@ def build(cls: type, data: Any, prefix: str) -> Any:
         if name not in data:
             continue
         annotation = hints[name]
-        if dataclasses.is_dataclass(annotation):
+        if isinstance(annotation, type) and dataclasses.is_dataclass(annotation):  # a section: its class
             kwargs[name] = build(annotation, data[name], key)
         else:
             kwargs[name] = check_value(key, data[name], annotation, f.metadata.get("range"))

@@ -260,9 +260,9 @@ def check_description(root: ET.Element, path: Path, spec: ArmSpec) -> None:
                 raise RobotDescriptionError(f"{path}: {tag} {str(el.get('name'))[:60]!r} is defined twice")
             named.add(el.get("name"))
     links = {link.get("name") for link in root.findall("link")}
-    for link in (spec.base_link, spec.mount.link):
-        if link not in links:
-            raise RobotDescriptionError(f"{path}: no link {link!r} (the {spec.name} spec's base or flange)")
+    for needed in (spec.base_link, spec.mount.link):
+        if needed not in links:
+            raise RobotDescriptionError(f"{path}: no link {needed!r} (the {spec.name} spec's base or flange)")
     for element in root.findall("link"):
         problem = _numbers_problem(element) or _inertial_problem(element)
         if problem:
@@ -331,11 +331,11 @@ def _strip_below(root: ET.Element, keep_link: str) -> None:
     doomed: set[ET.Element] = set()
     stack = [keep_link]
     while stack:
-        for joint, child in children.get(stack.pop(), []):
+        for joint, child_link in children.get(stack.pop(), []):
             doomed.add(joint)
-            if child not in doomed_links and child != keep_link:  # a loop below the flange: each link once
-                doomed_links.add(child)
-                stack.append(child)
+            if child_link not in doomed_links and child_link != keep_link:  # a loop below the flange: each once
+                doomed_links.add(child_link)
+                stack.append(child_link)
     root[:] = [el for el in root if el not in doomed and el.tag not in ("transmission", "gazebo")
                and not (el.tag == "link" and el.get("name") in doomed_links)]
 
@@ -358,7 +358,7 @@ def _add_link(root: ET.Element, name: str, parent: str, xyz: tuple[float, float,
         inertial = ET.SubElement(link, "inertial")
         ET.SubElement(inertial, "origin", xyz=at, rpy="0 0 0")
         ET.SubElement(inertial, "mass", value=f"{mass:.9g}")
-        ET.SubElement(inertial, "inertia", **_cylinder_inertia(mass, radius, length))
+        ET.SubElement(inertial, "inertia", _cylinder_inertia(mass, radius, length))
         for tag in ("visual", "collision") if shape else ():
             el = ET.SubElement(link, tag)
             ET.SubElement(el, "origin", xyz=at, rpy="0 0 0")

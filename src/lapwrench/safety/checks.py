@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from lapwrench.inputs import real_array
 from lapwrench.jit import bind, kernel
 from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.model import RobotModel
@@ -58,15 +59,11 @@ def _is_f64_c(x: object) -> bool:
 
 
 def real_vector(x: object) -> np.ndarray | None:
-    """``x`` as a C-contiguous float64 array, or None when it does not hold real numbers (text, objects,
-    complex values: numpy would raise, or warn and drop the imaginary part). For the measured values the
-    supervisor watches, off the per-cycle fast path (float64 arrays are used as they are)."""
-    if np.iscomplexobj(x):
-        return None
-    try:
-        return np.ascontiguousarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
+    """``x`` as a C-contiguous float64 array, or None when it does not hold real numbers (text, booleans,
+    objects, complex values: numpy would raise, or warn and drop the imaginary part), as the controller's
+    inputs are checked (:func:`lapwrench.inputs.real_array`). For the measured values the supervisor
+    watches, off the per-cycle fast path (float64 arrays are used as they are)."""
+    return real_array(x)
 
 
 @functools.cache

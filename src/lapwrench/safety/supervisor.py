@@ -329,8 +329,9 @@ class SafetySupervisor(SupervisorWatches):
             return self._stop_step()
         if self._resume_left:
             q_cmd = self._resumed(q_cmd)
-        usual = type(q_cmd) is np.ndarray and q_cmd.dtype == np.float64 and q_cmd.flags.c_contiguous
-        if usual and q_cmd.shape == self._q.shape:  # checked and accepted in one compiled call
+        problem: tuple[str, str] | None
+        if (type(q_cmd) is np.ndarray and q_cmd.dtype == np.float64 and q_cmd.flags.c_contiguous
+                and q_cmd.shape == self._q.shape):  # the usual command: checked and accepted in one compiled call
             code, j, value = self._accept_command(
                 q_cmd, self._history, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
                 self._a_max, self._j_max, self._stop_a, self._stop_j, self.dt,

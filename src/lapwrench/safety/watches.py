@@ -196,15 +196,16 @@ class SupervisorWatches:
                 return
             f = math.hypot(r[0], r[1], r[2])  # no overflow (and no warning) for huge finite values
             over = not (f <= c.max_residual_force)
+            since = self._residual_over_since
             if not over:
                 self._residual_over_since = None
-            elif self._residual_over_since is None:
-                self._residual_over_since, self._residual_over_cycles = time, 0
+                return
+            if since is None:
+                since = self._residual_over_since = time
+                self._residual_over_cycles = 0
             else:
                 self._residual_over_cycles += 1
-            if not over:
-                return
-            lasted = self.lasted(self._residual_over_since, self._residual_over_cycles, time)
+            lasted = self.lasted(since, self._residual_over_cycles, time)
             if not math.isfinite(f) or lasted >= c.residual_force_time - 1e-9:
                 self._hold(
                     time,
