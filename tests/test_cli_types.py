@@ -65,3 +65,23 @@ def test_a_pseudo_filesystem_is_no_place_for_an_output_even_for_root() -> None:
     it is not (before, ``run --log /proc/x.mcap`` failed with a traceback after the simulator started)."""
     assert "not writable" in (cli_types.writable_file_problem("/proc/x.mcap") or "")
     assert "not writable" in (cli_types.writable_dir_problem("/proc/run-out") or "")
+
+
+def test_a_port_left_in_time_wait_by_the_last_sessions_clients_is_free_and_a_listening_one_is_not() -> None:
+    """Ctrl-C on ``lapwrench ui`` with a page connected leaves its port in TIME_WAIT for up to a minute;
+    the probe said "Address already in use" where the server itself would have started."""
+    import socket
+
+    server = socket.socket()
+    server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as asyncio's and tokio's servers do
+    server.bind(("127.0.0.1", 0))
+    server.listen()
+    port = server.getsockname()[1]
+    assert cli_types.listen_problem("127.0.0.1", port) is not None  # listened on: taken
+    client = socket.create_connection(("127.0.0.1", port))
+    conn, _ = server.accept()
+    conn.close()  # the server's side closes first: its port goes to TIME_WAIT
+    client.recv(1)
+    client.close()
+    server.close()
+    assert cli_types.listen_problem("127.0.0.1", port) is None

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from lapwrench.config import Config, load
 from lapwrench.controller import Controller
 from lapwrench.rcm.geometry import initial_rcm_point
-from lapwrench.virtual import DEFAULT_Q0, HandScript, VirtualLog, limits_report, run_virtual
+from lapwrench.virtual import DEFAULT_Q0, HandScript, VirtualLog, limits_report, plot_virtual, run_virtual
 
 
 def _assert_inside_limits(ctrl: Controller, log: VirtualLog) -> None:
@@ -125,3 +127,13 @@ def test_the_supervisor_holds_a_virtual_run_that_starts_beyond_its_rcm_bound() -
     _, log = run_virtual(cfg, 1.0, p_R=p_R, controller=ctrl)
     assert log.alarm is not None and log.alarm.startswith("rcm_error"), log.alarm
     assert len(log.results) < 10
+
+
+def test_the_plot_of_a_run_with_a_cue_switched_off_draws_it_as_zero(tmp_path: Path) -> None:
+    """The README's ``cues:`` example switches tracking off: ``virtual`` ran, then its plot raised KeyError."""
+    cfg = load().replace(cues={"tracking": {"enabled": False}})
+    _, log = run_virtual(cfg, duration=0.05)
+    assert "tracking" not in log.results[-1].wrenches
+    out = tmp_path / "virtual.png"
+    plot_virtual(log, cfg, out)
+    assert out.stat().st_size > 0

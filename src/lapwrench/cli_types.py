@@ -222,6 +222,9 @@ def listen_problem(host: str, port: int) -> str | None:
         return f"cannot resolve {host}: {exc}"
     family, kind, proto, _, address = infos[0]
     with socket.socket(family, kind, proto) as s:
+        # as the servers bind (asyncio's and tokio's set it): a port left in TIME_WAIT by the last session's
+        # clients is free to them, and Linux still refuses a port another socket listens on
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(address)
         except OSError as exc:

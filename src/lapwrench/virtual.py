@@ -193,8 +193,9 @@ def plot_virtual(log: VirtualLog, cfg: Config, path: Path, title: str = "virtual
 
     t = np.array(log.t)
     e = np.array([r.rcm_error for r in log.results]) * 1e3
-    Fh = np.array([np.linalg.norm(r.wrenches["interaction"][3:]) for r in log.results])
-    Fc = np.array([np.linalg.norm(r.wrenches["tracking"][3:]) for r in log.results])
+    off = np.zeros(6)  # a cue the configuration switched off has no wrench: drawn as zero
+    Fh = np.array([np.linalg.norm(r.wrenches.get("interaction", off)[3:]) for r in log.results])
+    Fc = np.array([np.linalg.norm(r.wrenches.get("tracking", off)[3:]) for r in log.results])
     delta = np.array([r.delta for r in log.results])
     d = np.array(
         [
