@@ -35,3 +35,16 @@ def test_an_unwritable_cache_root_falls_back_to_the_next(tmp_path: Path, monkeyp
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocker / "sub"))  # under a file: cannot be created
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert jit.cache_dir().is_relative_to(tmp_path / "xdg")
+
+
+def test_cache_is_warm_says_whether_this_versions_kernels_were_compiled_before(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The demo says a first run compiles (minutes) instead of sitting at 0 % without a word."""
+    from lapwrench.config import load
+    from lapwrench.controller import Controller
+
+    Controller(load())  # compiled (or loaded) into the real cache
+    assert jit.cache_is_warm() or not jit.jit_enabled()
+    monkeypatch.setattr(numba.config, "CACHE_DIR", str(tmp_path))  # a version never compiled: an empty folder
+    assert not jit.cache_is_warm() or not jit.jit_enabled()

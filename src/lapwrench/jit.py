@@ -96,6 +96,12 @@ def kernel(fn: F) -> F:
     return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
 
 
+def cache_is_warm() -> bool:
+    """True when this source version's kernels have been compiled and cached before (a first run compiles
+    them, minutes on a small machine: commands say so rather than look stalled)."""
+    return not jit_enabled() or any(Path(numba.config.CACHE_DIR).rglob("*.nbi"))  # type: ignore[attr-defined]
+
+
 def jit_enabled() -> bool:
     """False under ``NUMBA_DISABLE_JIT=1`` (the functions then run as plain Python)."""
     return not numba.config.DISABLE_JIT  # type: ignore[attr-defined]  # set at run time, as CACHE_DIR

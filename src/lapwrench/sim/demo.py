@@ -13,6 +13,7 @@ import contextlib
 import os
 import platform
 import signal
+import sys
 import time
 import traceback
 from pathlib import Path
@@ -22,6 +23,7 @@ import mujoco
 
 from lapwrench import __version__
 from lapwrench import config as config_mod
+from lapwrench.jit import cache_is_warm
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import cue_scenarios, plots, report
 from lapwrench.sim.demo_tasks import (
@@ -182,6 +184,9 @@ def _run_demo(plan: DemoPlan, progress: bool, signals: StopSignals) -> dict[str,
         mininterval=1.0,
         bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}{postfix}]",
     )
+    if progress and not cache_is_warm():
+        bar.write("lapwrench demo: the first run of this version compiles the control kernels before the first "
+                  "simulated second (a few minutes; cached for the next runs)", file=sys.stderr)
     t0 = time.perf_counter()
     names = list(plan.scenarios) + ([PRINTED_DAMPING] if plan.printed_damping_check else [])
     try:
