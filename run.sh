@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The two fresh-machine commands:
 #   ./run.sh demo   -> the main job (headless simulation, writes a report folder)
-#   ./run.sh test   -> ruff + the whole pytest suite
+#   ./run.sh test   -> ruff + mypy + the whole pytest suite
 # Both create ./.venv and install the project on first use (and again when pyproject.toml changes).
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -51,6 +51,7 @@ case "$cmd" in
             fi
         fi
         "$VENV/bin/ruff" check src tests bench examples
+        "$VENV/bin/python" -m mypy  # the package's type hints ([tool.mypy] in pyproject.toml)
         if [ $# -gt 0 ]; then
             exec "$VENV/bin/python" -m pytest -q "$@"
         fi

@@ -17,7 +17,7 @@ from hardware.log.support import record
 
 from lapwrench import config as config_mod
 from lapwrench.cli import main
-from lapwrench.hardware.grip_identify import GripIdentifyError, config_snippet, identify, read_samples
+from lapwrench.hardware.grip_identify import GripIdentifyError, config_snippet, identify, read_samples, run_config
 from lapwrench.hardware.log import CycleRecord, RunLogger
 from lapwrench.hardware.log.live_sim import SimTelemetry
 from lapwrench.robot.arms import arm_spec
@@ -272,3 +272,66 @@ def test_a_simulated_run_gives_the_grip_the_simulator_carries(
     assert np.allclose(fitted.grip_com, com, atol=3e-3)
     fit, samples = identify(path)
     assert fit.tilt_span_deg > 15.0 and samples.kept < samples.untouched < samples.cycles  # gripped, then settling
+
+
+def json_log(path: Path, cycles: list[dict[str, Any]]) -> Path:
+    """A log whose cycles are JSON messages (the JSON-only logger's layout, or another program's)."""
+    import json
+
+    from mcap.writer import Writer
+
+    from lapwrench.hardware.log import CYCLE_TOPIC
+
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="test")
+        channel = writer.register_channel(topic=CYCLE_TOPIC, message_encoding="json", schema_id=0)
+        for i, c in enumerate(cycles):
+            writer.add_message(channel, log_time=i, publish_time=i, data=json.dumps(c).encode())
+        writer.finish()
+    return path
+
+
+def test_fields_of_the_wrong_kind_are_missing_values_not_a_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``"q": "abc"``, a joint given as text, a nested vector, an F/T reading as a mapping, an integer beyond
+    any float: each ended identify-grip with a ValueError traceback. They are cycles without usable
+    readings now: the good cycles around them still give the grip, and a log of nothing else is one line."""
+    good = [c.to_dict() for c in untouched_cycles("panda", GOOD)]
+    odd = [{**good[0], "q": "abc"}, {**good[0], "q": [0.1] * 6 + ["a"]}, {**good[0], "dq": [[0.0] * 7]},
+           {**good[0], "ft_force": {"x": 1.0}}, {**good[0], "ft_torque": [10**400, 0, 0]},
+           {**good[0], "tactile": "none"}, {**good[0], "q": 5}]
+    code, out, err = cli([str(json_log(tmp_path / "mixed.mcap", odd + good + odd))], capsys)
+    assert code == 0 and err == "", err
+    assert f"{GOOD} of {GOOD + 2 * len(odd)} cycles untouched with the arm still" in out
+    cfg = pasted_config(out)
+    assert_grip(cfg.scope.grip_mass, np.array(cfg.scope.grip_com))
+    code, out, err = cli([str(json_log(tmp_path / "odd.mcap", odd))], capsys)
+    assert code == 2 and not out and len(err.strip().splitlines()) == 1
+    assert err.startswith(f"lapwrench identify-grip: {tmp_path / 'odd.mcap'}: of ")
+
+
+@pytest.mark.parametrize("logged", [[1, 2], "paper", 5])
+def test_a_logged_configuration_that_is_not_a_mapping_is_refused_not_replaced_by_the_defaults(logged: Any) -> None:
+    """It was taken as no configuration at all: the fit ran silently with the default arm and interaction
+    section, which need not be the run's. --config still stands in for it."""
+    with pytest.raises(GripIdentifyError, match=r"configuration is not a mapping of sections \(a \w+\); give"):
+        run_config({"config": logged}, None, None)
+    assert run_config({"config": logged}, "swapped-damping", None) == config_mod.load("swapped-damping")
+
+
+def test_a_log_name_that_is_not_utf8_is_printed_escaped(logs: dict[str, Path], tmp_path: Path) -> None:
+    """The fit's first line names the log: with stdout strict UTF-8 (a UTF-8 locale other than C.UTF-8), a
+    name with a byte that is not UTF-8 ended identify-grip with a UnicodeEncodeError traceback."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    log = tmp_path / os.fsdecode(b"run-\xff.mcap")
+    shutil.copyfile(logs["good"], log)
+    proc = subprocess.run([sys.executable, "-m", "lapwrench.cli", "identify-grip", str(log)], capture_output=True,
+                          text=True, timeout=300, env={**os.environ, "PYTHONIOENCODING": "utf-8:strict"})
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert proc.stdout.startswith(f"grip identified from {tmp_path}/run-\\xff.mcap: ")

@@ -8,13 +8,18 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, NoReturn
 
 import pandas as pd
 import pytest
 import yaml
 
 from lapwrench.cli import main
+from lapwrench.study.execute import job_rows
+from lapwrench.study.spec import expand, load_study
+from lapwrench.study.table import ResultTable
 
 
 def _write(path: Path, data: object) -> Path:
@@ -176,3 +181,113 @@ def test_tune_interrupted_exits_130_and_writes_no_result(tmp_path: Path) -> None
     assert "lapwrench tune: interrupted" in err and "Traceback" not in err
     assert not (out / "best.yaml").exists() and not (out / "trials.parquet").exists()
     assert not (out / "tune_report.md").exists()
+
+
+@pytest.fixture
+def kept_signals() -> Iterator[None]:
+    """The sweep and tune commands turn SIGTERM and SIGHUP into KeyboardInterrupt: undone after the test."""
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    yield
+    for sig, handler in handlers.items():
+        signal.signal(sig, handler)
+
+
+def _interrupt(*_: object, **__: object) -> NoReturn:
+    raise KeyboardInterrupt
+
+
+def test_an_interrupt_before_any_run_finished_says_nothing_was_saved(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, kept_signals: None
+) -> None:
+    """Ctrl-C while Ray started said "finished runs are saved in ." without --out (the folder is
+    reports/sweeps/<name>), and said so when no run had finished and nothing was saved anywhere."""
+    import lapwrench.study.runner
+
+    study = _write(tmp_path / "study.yaml", STUDY)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(lapwrench.study.runner, "run_study", _interrupt)
+    assert main(["sweep", str(study), "--quiet"]) == 130
+    assert capsys.readouterr().err == "lapwrench sweep: interrupted; no run had finished, nothing was saved\n"
+
+    def one_run_then_interrupt(spec: Any, out: Path, **_: object) -> NoReturn:
+        table = ResultTable(out)
+        table.add(job_rows(expand(spec)[0], spec.name, None, "RuntimeError: stopped", 1.0))
+        table.save()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(lapwrench.study.runner, "run_study", one_run_then_interrupt)
+    assert main(["sweep", str(study), "--quiet"]) == 130
+    saved = Path("reports") / "sweeps" / STUDY["name"] / "runs.parquet"
+    assert capsys.readouterr().err == (f"lapwrench sweep: interrupted; the finished runs are saved in {saved}; run the "
+                                       "same command again to resume\n")
+    assert len(pd.read_parquet(saved)) == 1
+
+
+def test_a_report_that_cannot_be_written_is_one_line_and_keeps_the_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kept_signals: None
+) -> None:
+    """Every job already in the table (no Ray), but report.md is a folder: the IsADirectoryError of the
+    report's writing ended the sweep with a traceback."""
+    study = _write(tmp_path / "study.yaml", STUDY)
+    out = tmp_path / "out"
+    out.mkdir()
+    table = ResultTable(out)
+    table.add([r for job in expand(load_study(study)) for r in job_rows(job, "cli", None, "RuntimeError: x", 1.0)])
+    table.save()
+    (out / "report.md").mkdir()
+    assert main(["sweep", str(study), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"lapwrench sweep: the runs are saved in {out / 'runs.parquet'}, but the report cannot be "
+                          "written: Is a directory") and len(err.splitlines()) == 1, err
+
+
+def test_tune_results_or_a_check_cut_short_are_said_as_such(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, kept_signals: None
+) -> None:
+    """After the search: Ctrl-C during the check of best.yaml was reported as "interrupted" only (best.yaml
+    left unchecked, unsaid), and a report that cannot be written ended tune with a traceback."""
+    import lapwrench.study.tune
+    from lapwrench import config as config_mod
+
+    tune_file = _write(tmp_path / "tune.yaml", {**STUDY, "search": {"viscous.k_t": {"uniform": [120.0, 180.0]}},
+                                                "objective": {"metric": "completion_time_s"}})
+    out = tmp_path / "out"
+    best = out / "best.yaml"
+    trial = {"p.viscous.k_t": 150.0, "score": 5.0, "objective": 5.0, "excess": 0.0, "failed": 0, "feasible": True}
+
+    def searched(spec: Any, where: Path, **_: object) -> lapwrench.study.tune.TuneOutcome:
+        config_mod.dump(config_mod.load(), best)
+        return lapwrench.study.tune.TuneOutcome([trial], trial, best)
+
+    monkeypatch.setattr(lapwrench.study.tune, "run_tune", searched)
+    monkeypatch.setattr(lapwrench.study.tune, "evaluate_config", _interrupt)
+    assert main(["tune", str(tune_file), "--out", str(out), "--quiet"]) == 130
+    assert capsys.readouterr().err == ("lapwrench tune: interrupted after the search; best.yaml is written but not "
+                                       "checked; no report was written\n")
+    monkeypatch.setattr(lapwrench.study.tune, "run_tune",
+                        lambda spec, where, **_: lapwrench.study.tune.TuneOutcome([trial], None, None))
+    (out / "tune_report.md").mkdir()
+    assert main(["tune", str(tune_file), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"lapwrench tune: the trials are saved in {out}, but the report cannot be written: Is a "
+                          "directory") and len(err.splitlines()) == 1, err
+
+
+@pytest.mark.parametrize(("command", "where"), [("sweep", "out"), ("sweep", "study"), ("tune", "out")])
+def test_a_path_that_is_not_utf8_is_refused_before_ray_starts(tmp_path: Path, command: str, where: str) -> None:
+    """A byte of a Latin-1 name on the command line: Ray reads the process's command line as it starts and
+    failed on it ("cannot start or reach a local Ray instance: UnicodeEncodeError"), and Ray Tune's storage
+    path with a traceback. Now one line naming the path, before Ray starts and before --out is made."""
+    odd = os.fsdecode(b"r\xe9sultats")
+    data = STUDY if command == "sweep" else {
+        **STUDY, "search": {"viscous.k_t": {"uniform": [120.0, 180.0]}}, "objective": {"metric": "duration_s"}}
+    study = _write(tmp_path / (f"{odd}.yaml" if where == "study" else "study.yaml"), data)
+    out = tmp_path / (odd if where == "out" else "out")
+    proc = subprocess.run([sys.executable, "-m", "lapwrench.cli", command, str(study), "--out", str(out), "--quiet",
+                           "--workers", "1"], capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "MUJOCO_GL": "egl"})
+    assert proc.returncode == 2, proc.stderr
+    what = "--out" if where == "out" else "the study file"
+    assert proc.stderr.startswith(f"lapwrench {command}: {what} {tmp_path}/r\\xe9sultats")
+    assert "is not UTF-8 text, which Ray needs on the command line" in proc.stderr
+    assert len(proc.stderr.splitlines()) == 1 and not out.exists()

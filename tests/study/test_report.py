@@ -207,3 +207,19 @@ def test_rows_without_metrics_or_columns_still_give_a_report(tmp_path: Path) -> 
     assert not list(tmp_path.glob("*.png"))
     bare = write_report(pd.DataFrame(), tmp_path / "bare", spec).read_text()
     assert "**Jobs:** 0 · **rows:** 0" in bare
+
+
+def test_metrics_too_large_to_plot_are_left_out_not_a_crash(tmp_path: Path) -> None:
+    """±1e308 (a run that blew up) made matplotlib fail ("arange: cannot compute length") and the sweep end
+    in a traceback after its runs; the mean of two such values is inf. They are left out now, as inf is."""
+    rows = pd.DataFrame([
+        _row("0" * 16, "grip", "high", 0, m__completion_time_s=1e308, m__rcm_error_max_mm=-1e308, p__x=1.0),
+        _row("1" * 16, "grip", "high", 1, m__completion_time_s=-1e308, m__rcm_error_max_mm=1e308, p__x=2.0),
+        _row("2" * 16, "grip", "high", 2, m__completion_time_s=5.0, m__rcm_error_max_mm=0.5, p__x=1.0),
+    ])
+    spec = ReportSpec(title="Huge", params=("p.x",), metrics=("m.completion_time_s", "m.rcm_error_max_mm"),
+                      compare=(Comparison("c", "grip", "high", "m.completion_time_s", 6.0),))
+    text = write_report(rows, tmp_path, spec).read_text()
+    assert "| c | 1 of 3 | 5 | 5–5 | 5 | 6 |  |" in text  # the one finite, plottable value
+    assert "inf" not in text and "nan" not in text.lower()
+    assert (tmp_path / "pareto.png").exists() and (tmp_path / "dist_x__completion_time_s.png").exists()

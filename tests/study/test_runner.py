@@ -208,3 +208,51 @@ def test_a_table_of_another_study_is_refused_before_ray_starts(tmp_path: Path) -
         run_study(from_dict(STUDY), tmp_path, progress=False)
     assert (tmp_path / "runs.parquet").read_bytes() == before
     assert ("ray" in system.modules and system.modules["ray"].is_initialized()) == ray_before
+
+
+def _session(sid: int) -> list[str]:
+    """The command lines of the processes of session ``sid`` (ps)."""
+    ps = subprocess.run(["ps", "-o", "args=", "--sid", str(sid)], capture_output=True, text=True)
+    return [line for line in ps.stdout.splitlines() if line.strip()]
+
+
+def test_ctrl_c_while_ray_starts_leaves_no_ray_process_behind(tmp_path: Path) -> None:
+    """Ctrl-C once Ray's dashboard agent runs, in the middle of ray.init: the agent and the runtime-env
+    agent outlived the sweep (their raylet gone), until killed by hand. The signal now waits for the
+    start to finish, then Ray is shut down whole: no process of the sweep's session is left."""
+    study = tmp_path / "study.yaml"
+    study.write_text(yaml.safe_dump({**STUDY, "grid": {}}))
+    proc = subprocess.Popen([sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(tmp_path / "out"),
+                             "--workers", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True)
+    deadline = time.monotonic() + 240
+    while proc.poll() is None and time.monotonic() < deadline and not any(
+            "DashboardAgent" in line or "dashboard/agent.py" in line for line in _session(proc.pid)):
+        time.sleep(0.02)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 130 and err.startswith("lapwrench sweep: interrupted; "), err
+    deadline = time.monotonic() + 60  # Ray's own shutdown: its processes end within seconds
+    while _session(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    left = _session(proc.pid)
+    for pid in subprocess.run(["ps", "-o", "pid=", "--sid", str(proc.pid)], capture_output=True,
+                              text=True).stdout.split():
+        os.kill(int(pid), signal.SIGKILL)  # this test's own processes, were any left
+    assert left == []
+
+
+def test_auto_is_checked_at_the_address_it_stands_for(monkeypatch: pytest.MonkeyPatch) -> None:
+    """--address auto connects to RAY_ADDRESS or to the cluster `ray start` wrote down last (a file `ray stop`
+    leaves behind): a cluster gone since made Ray retry for minutes, unchecked. Now refused at once."""
+    port = _free_port()  # nothing listens there
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")
+    with pytest.raises(ClusterError, match=rf"cannot reach the Ray cluster at auto \(127\.0\.0\.1:{port}\)"):
+        check_reachable("auto")
+
+
+def test_a_host_name_too_long_for_dns_is_a_clear_error() -> None:
+    """A label over 63 characters: the IDNA codec's UnicodeError went through as a traceback."""
+    with pytest.raises(ClusterError, match="not a valid host name"):
+        check_reachable("h" * 300 + ":6379")

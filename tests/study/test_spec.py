@@ -408,3 +408,39 @@ def test_samples_respect_their_bounds_and_are_reproducible(lo: float, width: flo
         assert 0.0 <= j.world["detector_noise_px"] <= 2.0
         assert j.world["incision_shift_mm"] in (1.0, 2.0, 3.0, 4.0, 5.0)
     assert [j.run_id for j in expand(from_dict(data))] == [j.run_id for j in jobs]
+
+
+@pytest.mark.parametrize("name", ["a\nb", "a\tb", "a\x1b[31mb", "a\rb"])
+def test_a_name_with_a_line_break_or_control_character_is_refused(name: str) -> None:
+    """Such a name became a results folder with a line break in it and broke the report's title line."""
+    _refused(_study(name=name), "must be printable text")
+
+
+def test_a_scenario_listed_twice_is_refused() -> None:
+    """[grip, grip] gave every job twice under one run id: twice the rows, each counted twice in the report."""
+    _refused(_study(scenarios=["grip", "rcm-disturbance", "grip"]), "'scenarios' lists a scenario twice")
+
+
+def _example(module: Any) -> Any:
+    """The YAML example of a module's docstring (the block after its ``::``)."""
+    import textwrap
+
+    import yaml
+
+    block = module.__doc__.split("::", 1)[1].split("\n\n", 2)[1]
+    return yaml.safe_load(textwrap.dedent(block))
+
+
+def test_the_documented_examples_load() -> None:
+    """The docstrings' examples swept interaction.k_t and rcm.K_p, keys the configuration does not have."""
+    from lapwrench.study import spec, tune_spec
+
+    assert set(from_dict(_example(spec)).grid) == {"viscous.k_t", "world.trocar_stiffness"}
+    assert set(tune_spec.from_dict(_example(tune_spec)).search) == {"viscous.k_t", "rcm.Kp"}
+
+
+def test_the_key_an_error_gives_as_an_example_is_a_key() -> None:
+    """'parameter keys are dotted names such as interaction.k_t' named a key that is refused in turn."""
+    err = _refused(_study(grid={"": [1]}), "parameter keys are dotted names such as ")
+    example = str(err).split("such as ")[1].split(",")[0]
+    assert from_dict(_study(grid={example: [100.0, 120.0]})).grid[example] == (100.0, 120.0)

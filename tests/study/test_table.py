@@ -146,3 +146,33 @@ def test_a_directory_named_like_the_table_is_refused(tmp_path: Path) -> None:
     (tmp_path / FILE).mkdir()
     with pytest.raises(TableError, match=FILE):
         ResultTable(tmp_path)
+
+
+@pytest.mark.parametrize("columns", [
+    {"run_id": [None, "b"], "status": ["ok", "ok"]},  # a missing run id: KeyError from ResultTable.done
+    {"run_id": [[1], [2]], "status": ["ok", "ok"]},  # a list: TypeError (unhashable) from ResultTable.done
+    {"run_id": [1, 2], "status": ["ok", "failed"]},
+    {"run_id": ["a", "b"], "status": ["ok", "finished"]},
+    {"run_id": ["a", "b"], "status": ["ok", None]},
+])
+def test_rows_without_a_text_run_id_and_a_known_status_are_refused(tmp_path: Path, columns: dict) -> None:
+    """A table with the right columns but other values is not a study's table: a TableError naming the
+    file (one line of lapwrench sweep), not a KeyError or TypeError traceback when the done ids are read."""
+    pd.DataFrame(columns).to_parquet(tmp_path / FILE)
+    with pytest.raises(TableError) as info:
+        ResultTable(tmp_path).done  # noqa: B018 (what a sweep reads first)
+    assert str(tmp_path / FILE) in str(info.value) and "not a lapwrench study table" in str(info.value)
+
+
+def test_a_folder_name_that_is_not_utf8_holds_the_table(tmp_path: Path) -> None:
+    """pyarrow takes only UTF-8 path names: --out with a Latin-1 name ran every job, then failed to save
+    their rows (a UnicodeEncodeError traceback, nothing kept)."""
+    import os
+
+    out = tmp_path / os.fsdecode(b"r\xe9sultats")
+    out.mkdir()
+    table = ResultTable(out)
+    table.add([_row("a"), _row("b", "failed")])
+    table.save()
+    again = ResultTable(out)
+    assert again.done == {"a", "b"} and again.failed_ids() == {"b"}

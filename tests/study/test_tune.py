@@ -5,6 +5,10 @@ end to end in tests/study/test_cli.py)."""
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -77,3 +81,22 @@ def _raw() -> dict:
     return {"name": "t", "scenarios": ["grip", "rcm-disturbance"], "seeds": [0, 1], "time_scale": 0.05,
             "detector": "projected", "search": {"viscous.k_t": {"uniform": [100, 200]}},
             "objective": {"metric": "duration_s", "reduce": "max"}}
+
+
+@pytest.mark.slow
+def test_a_search_without_a_feasible_trial_removes_an_earlier_best_yaml(tmp_path: Path) -> None:
+    """A second search into the same folder that met no constraint left the first search's best.yaml
+    beside a report saying "no configuration was written": a stale file passed off as the result."""
+    out = tmp_path / "out"
+    out.mkdir()
+    config_mod.dump(config_mod.load(), out / "best.yaml")  # an earlier search's result
+    tune_file = tmp_path / "tune.yaml"
+    tune_file.write_text(yaml.safe_dump({**_raw(), "scenarios": ["grip"], "seeds": [0], "trials": 1,
+                                         "constraints": [{"metric": "rcm_error_max_mm", "max": -1.0}]}))
+    proc = subprocess.run([sys.executable, "-m", "lapwrench.cli", "tune", str(tune_file), "--out", str(out),
+                           "--workers", "1", "--quiet"], capture_output=True, text=True, timeout=900,
+                          env={**os.environ, "MUJOCO_GL": "egl"})
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert "0 of 1 trials met every constraint" in proc.stdout
+    assert not (out / "best.yaml").exists()
+    assert "no configuration was written" in (out / "tune_report.md").read_text()

@@ -36,7 +36,7 @@ import numpy as np
 from lapwrench import config as config_mod
 from lapwrench.cli_types import float_in
 from lapwrench.hardware.grip_fit import GripFit, GripFitError, fit_grip
-from lapwrench.hardware.log.reader import LogFileError, check_log_file, iter_messages
+from lapwrench.hardware.log.reader import LogFileError, check_log_file, display_path, iter_messages
 from lapwrench.hardware.log.topics import CYCLE_TOPIC, META_TOPIC
 
 __all__ = [
@@ -90,6 +90,9 @@ def run_config(meta: Mapping[str, Any] | None, config: str | None, robot: str | 
                 cfg = config_mod.from_dict(logged)
             except config_mod.ConfigError as exc:
                 raise GripIdentifyError(f"the log's configuration does not load ({exc}); give --config") from exc
+        elif logged is not None:  # not the defaults in silence: the run may have had another arm or grip
+            raise GripIdentifyError(f"the log's configuration is not a mapping of sections (a {type(logged).__name__});"
+                                    " give --config")
         else:
             cfg = config_mod.load()
         return cfg if robot is None else cfg.replace(robot={"kind": robot})
@@ -108,12 +111,18 @@ def log_meta(path: str | Path) -> dict[str, Any] | None:
 
 
 def _vector(c: Mapping[str, Any], key: str, n: int | None = None) -> np.ndarray | None:
-    """A cycle's field as a float array (None when absent, of another length or not finite)."""
+    """A cycle's field as a 1-D float array (None when absent, not a list of numbers, of another
+    length or not finite: a foreign or damaged log's ``"q": "abc"`` is a missing value, not a crash)."""
     v = c.get(key)
-    if v is None or (n is not None and len(v) != n) or any(x is None for x in v):
+    if not isinstance(v, list | tuple) or (n is not None and len(v) != n):
         return None
-    a = np.asarray(v, dtype=float)
-    return a if np.isfinite(a).all() else None
+    if not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
+        return None  # None (a missing value), text, a nested list
+    try:
+        a = np.asarray(v, dtype=float)
+    except OverflowError:  # an integer beyond any float
+        return None
+    return a if a.ndim == 1 and np.isfinite(a).all() else None
 
 
 def _untouched(c: Mapping[str, Any], cfg: config_mod.Config, assume_untouched: bool) -> tuple[bool, bool]:
@@ -256,7 +265,7 @@ def identify_grip_main(args: argparse.Namespace) -> int:
         return 2
     if samples.truncated:
         print(f"lapwrench identify-grip: {args.log} is truncated; read {samples.cycles} cycles", file=sys.stderr)
-    print(report(args.log, fit, samples))
+    print(report(display_path(args.log), fit, samples))
     return 0
 
 

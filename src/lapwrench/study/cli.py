@@ -1,8 +1,9 @@
 """The ``lapwrench sweep`` and ``lapwrench tune`` commands.
 
 A bad argument or study file ends with one line ``lapwrench sweep: ...`` on stderr and exit code 2,
-before Ray starts. Ctrl-C, SIGTERM and SIGHUP stop a sweep after saving every finished row (exit 130);
-running it again resumes.
+before Ray starts. Ctrl-C, SIGTERM and SIGHUP stop a sweep after saving every finished row (exit 130,
+one line saying where they are, or that none had finished); running it again resumes. A report that
+cannot be written (the disk filled) is one line and exit code 1, the runs kept.
 """
 
 from __future__ import annotations
@@ -43,6 +44,19 @@ def add_parsers(sub: Any) -> None:
         p.add_argument("--quiet", action="store_true", help="no progress bar")
     sw.set_defaults(func=sweep_main)
     tu.set_defaults(func=tune_main)
+
+
+def _utf8_arguments(args: argparse.Namespace) -> None:
+    """StudyUsageError for a path or address that is not UTF-8 text (a byte of a Latin-1 file name): Ray
+    reads this process's command line when it starts and fails on it, Ray Tune on its storage path, and
+    pyarrow takes only UTF-8 path names."""
+    for name, value in (("the study file", args.study), ("--out", args.out), ("--address", args.address)):
+        try:
+            str(value).encode("utf-8")
+        except UnicodeEncodeError:
+            shown = os.fsencode(str(value)).decode("utf-8", "backslashreplace")
+            raise StudyUsageError(f"{name} {cut(shown, 100)} is not UTF-8 text, which Ray needs on the command line; "
+                                  "rename it or choose another path") from None
 
 
 def _prepare(args: argparse.Namespace, command: str) -> None:
@@ -108,6 +122,7 @@ def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
     from lapwrench.study.spec import StudyError, load_study
     from lapwrench.study.tune_spec import load_tune
 
+    _utf8_arguments(args)
     try:
         spec = load_study(args.study) if command == "sweep" else load_tune(args.study)
     except StudyError as exc:
@@ -120,9 +135,21 @@ def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
     return spec, out
 
 
+def _saved(out: Path | None) -> str:
+    """What an interrupted sweep leaves in ``out`` (None: interrupted before its folder was known)."""
+    from lapwrench.study.table import FILE
+
+    table = None if out is None else out / FILE
+    if table is None or not table.is_file():
+        return "no run had finished, nothing was saved"
+    return f"the finished runs are saved in {cut(str(table), 200)}; run the same command again to resume"
+
+
 def sweep_main(args: argparse.Namespace) -> int:
-    """Run a study; exit 0 when every job ran (failed runs included, as rows), 130 when interrupted."""
+    """Run a study; exit 0 when every job ran (failed runs included, as rows), 130 when interrupted,
+    1 when the runs are saved but the report (or the study's copy) cannot be written."""
     os.environ.setdefault("MUJOCO_GL", "egl")
+    out: Path | None = None
     try:
         spec, out = _start(args, "sweep")
         from lapwrench.study.runner import SAVE_EVERY_S, ClusterError, run_study
@@ -139,24 +166,31 @@ def sweep_main(args: argparse.Namespace) -> int:
         print(f"lapwrench sweep: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"lapwrench sweep: interrupted; finished runs are saved in {Path(args.out or '.')}; run the same "
-              "command again to resume", file=sys.stderr)
+        print(f"lapwrench sweep: interrupted; {_saved(out)}", file=sys.stderr)
         return 130
     from lapwrench.study.report import write_report
 
-    if Path(args.study).resolve() != (out / "study.yaml").resolve():
-        shutil.copyfile(args.study, out / "study.yaml")
     notes = [f"This sweep ran {outcome.ran} jobs ({outcome.failed} failed) and skipped {outcome.skipped} already in "
              f"the table, in {outcome.wall_s:.0f} s on {len(outcome.nodes - {'lost'}) or 0} node(s)."]
-    report = write_report(table.frame(), out, spec.report, notes=notes)
+    try:
+        if Path(args.study).resolve() != (out / "study.yaml").resolve():
+            shutil.copyfile(args.study, out / "study.yaml")
+        report = write_report(table.frame(), out, spec.report, notes=notes)
+    except OSError as exc:  # a full disk, a folder made read-only, a report.md that is a folder
+        print(f"lapwrench sweep: the runs are saved in {cut(str(table.path), 200)}, but the report cannot be "
+              f"written: {exc.strerror or exc}{'' if exc.filename is None else f' ({cut(str(exc.filename), 200)})'}",
+              file=sys.stderr)
+        return 1
     print(f"lapwrench sweep: {notes[0]}")
     print(f"results: {table.path}\nreport: {report}")
     return 0
 
 
 def tune_main(args: argparse.Namespace) -> int:
-    """Search gains; exit 0 with best.yaml written, 1 when no trial met every constraint."""
+    """Search gains; exit 0 with best.yaml written, 1 when no trial met every constraint (or the results
+    cannot be written), 130 when interrupted."""
     os.environ.setdefault("MUJOCO_GL", "egl")
+    out: Path | None = None
     try:
         spec, out = _start(args, "tune")
         from lapwrench.study.runner import ClusterError
@@ -172,7 +206,20 @@ def tune_main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("lapwrench tune: interrupted; no configuration was written", file=sys.stderr)
         return 130
-    return _finish_tune(spec, out, outcome)
+    except OSError as exc:  # trials.parquet or best.yaml: a full disk, a folder made read-only
+        print(f"lapwrench tune: cannot write the results in {cut(str(out or args.out), 200)}: {exc.strerror or exc}",
+              file=sys.stderr)
+        return 1
+    try:
+        return _finish_tune(spec, out, outcome)
+    except KeyboardInterrupt:
+        unchecked = "best.yaml is written but not checked; " if outcome.best_config is not None else ""
+        print(f"lapwrench tune: interrupted after the search; {unchecked}no report was written", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        print(f"lapwrench tune: the trials are saved in {cut(str(out), 200)}, but the report cannot be written: "
+              f"{exc.strerror or exc}", file=sys.stderr)
+        return 1
 
 
 def _finish_tune(spec: Any, out: Path, outcome: Any) -> int:

@@ -11,6 +11,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TypeGuard
 
 import matplotlib
 
@@ -28,6 +29,9 @@ N_BINS = 5
 MISSING = "—"
 """How a missing text cell (None, NaN) is shown."""
 
+LARGEST = 1e100
+"""Metric values beyond this magnitude are left out of statistics and figures, as NaN and inf are."""
+
 
 def text(value: object) -> str:
     """``value`` as a label: None and NaN become :data:`MISSING`, integers stay whole, other numbers keep
@@ -38,7 +42,7 @@ def text(value: object) -> str:
         return str(bool(value))
     if isinstance(value, int | np.integer):
         return str(int(value))
-    if isinstance(value, float | np.floating) and float(value).is_integer() and abs(value) < 1e15:
+    if isinstance(value, float | np.floating) and float(value).is_integer() and abs(float(value)) < 1e15:
         return str(int(value))  # a seed read back as float (its column held a NaN)
     if isinstance(value, float | np.floating):
         return f"{float(value):.4g}"
@@ -46,12 +50,16 @@ def text(value: object) -> str:
 
 
 def numeric(values: pd.Series | Sequence[object]) -> np.ndarray:
-    """The values as floats: bools as 0/1, anything not a number (None, text) as NaN."""
+    """The values as floats: bools as 0/1, anything not a number (None, text) as NaN, a number beyond
+    :data:`LARGEST` (a run that blew up) as ±inf, which is left out like inf: a figure's axis or a mean
+    over such values would overflow."""
     series = values if isinstance(values, pd.Series) else pd.Series(list(values), dtype=object)
-    return pd.to_numeric(series.astype(object), errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+    out = pd.to_numeric(series.astype(object), errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(out) > LARGEST, np.copysign(np.inf, out), out)
 
 
-def _is_number(value: object) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float | np.integer | np.floating]:
     """A real number that is not a bool (bools are categories: True/False)."""
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool | np.bool_)
 

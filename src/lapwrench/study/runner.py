@@ -10,6 +10,7 @@ any other failure; the study goes on.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
@@ -18,7 +19,7 @@ import socket
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,16 +63,34 @@ def parse_address(address: str) -> tuple[str, int] | None:
     return host.strip("[]"), int(port)
 
 
+def _auto_address() -> str:
+    """The ``HOST:PORT`` Ray's ``auto`` means here: ``RAY_ADDRESS``, else the cluster ``ray start`` last
+    wrote in Ray's temporary folder (which ``ray stop`` leaves behind), else a running one; ClusterError
+    when there is none."""
+    from ray._private.services import get_ray_address_from_environment  # Ray's own resolution of "auto"
+
+    try:
+        return str(get_ray_address_from_environment("auto", None))
+    except ConnectionError as exc:
+        raise ClusterError(f"--address auto: {one_line(exc)}") from exc
+
+
 def check_reachable(address: str, timeout_s: float = 3.0) -> None:
     """ClusterError unless ``HOST:PORT`` accepts a TCP connection within ``timeout_s`` (Ray itself
-    retries an unreachable address for minutes). ``auto`` is left to Ray."""
+    retries an unreachable address for minutes). ``auto`` is resolved as Ray does (:func:`_auto_address`)
+    and checked the same way: a cluster stopped since is refused at once."""
     target = parse_address(address)
     if target is None:
-        return
+        resolved = _auto_address()
+        if resolved == "auto" or (target := parse_address(resolved)) is None:
+            return  # a running instance found by its processes: Ray connects to it
+        address = f"auto ({resolved})"
     try:
         socket.create_connection(target, timeout=timeout_s).close()
     except OSError as exc:
         raise ClusterError(f"cannot reach the Ray cluster at {address[:80]}: {exc.strerror or exc}") from exc
+    except UnicodeError as exc:  # a host name the IDNA codec refuses (a label over 63 characters)
+        raise ClusterError(f"cannot reach the Ray cluster at {address[:80]}: not a valid host name ({exc})") from exc
 
 
 def _signal_handlers() -> dict[int, Any]:
@@ -94,19 +113,40 @@ def start_ray(address: str | None, workers: int | None) -> int:
                               "runtime_env": {"env_vars": WORKER_ENV}}
     if address:
         check_reachable(address)
-    handlers = _signal_handlers()
+    with _held_signals() as held:
+        try:
+            if address:
+                ray.init(address=address, **kwargs)
+            else:
+                # "local": a new instance of our own, even when another cluster runs on this machine
+                ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+            raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
     try:
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
-            # "local": a new instance of our own, even when another cluster runs on this machine
-            ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
-    except (ConnectionError, RuntimeError, ValueError) as exc:
-        where = f"the Ray cluster at {address}" if address else "a local Ray instance"
-        raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
-    for sig, handler in handlers.items():  # ray.init installs its own SIGTERM handler: the caller's wins
-        signal.signal(sig, handler)
+        for sig in held:  # now, with the caller's handlers back: Ctrl-C during the start raises here
+            signal.raise_signal(sig)
+    except BaseException:
+        ray.shutdown()  # Ray has started whole: its shutdown stops every process it started
+        raise
     return _cluster_cpus()
+
+
+@contextlib.contextmanager
+def _held_signals() -> Iterator[list[int]]:
+    """SIGINT, SIGTERM and SIGHUP noted, not acted on, while the block runs (ray.init): a start cut
+    halfway leaves Ray's agents running with no raylet, long after this process. The caller's handlers
+    come back at the end (ray.init installs its own SIGTERM handler: the caller's wins); the signals
+    noted are the caller's to deliver."""
+    handlers = _signal_handlers()
+    held: list[int] = []
+    for sig in handlers:
+        signal.signal(sig, lambda signum, _frame: held.append(signum))
+    try:
+        yield held
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
 
 
 def _cluster_cpus() -> int:

@@ -169,7 +169,7 @@ def check_key(base: config_mod.Config, key: str, values: tuple[Any, ...]) -> lis
     Returns what each value resolves to (the configuration and world as sorted JSON), so two values
     that mean the same (100 and 100.0) can be told apart from two that differ."""
     if not isinstance(key, str) or not key:
-        raise SpaceError(f"parameter keys are dotted names such as interaction.k_t, got {short(key)}")
+        raise SpaceError(f"parameter keys are dotted names such as viscous.k_t, got {short(key)}")
     resolved = []
     for v in values:
         try:

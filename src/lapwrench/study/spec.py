@@ -10,7 +10,7 @@ draws (surgeon variability, say)::
     time_scale: 1.0                # shorten the scenarios (0.05-1)
     detector: shipped              # the tracking scenarios' detector (shipped, classical, projected, a model path)
     grid:                          # every combination
-      interaction.k_t: [100, 150, 200]
+      viscous.k_t: [100, 150, 200]
       world.trocar_stiffness: [0.5, 1.0, 2.0]
     sample:                        # drawn anew for every job (seeded: the same study draws the same values)
       world.surgeon_force: {normal: [1.0, 0.15], min: 0.5, max: 1.5}
@@ -232,6 +232,8 @@ def _name(value: Any) -> str:
         raise StudyError(f"'name' {short(name)} is longer than {MAX_NAME_CHARS} characters")
     if any(c in name for c in "/\\\0") or name in (".", ".."):
         raise StudyError(f"'name' {short(name)} must be a plain folder name (no '/', '\\' or '..')")
+    if not name.isprintable():  # a line break or an escape: a folder name no shell lists plainly, a broken title
+        raise StudyError(f"'name' {short(name)} must be printable text (no line break, tab or control character)")
     return name
 
 
@@ -269,6 +271,8 @@ def from_dict(data: Any, source: str = "study") -> StudySpec:
     for s in scenarios:
         if not isinstance(s, str) or s not in SCENARIOS:
             raise StudyError(f"'scenarios' holds {short(s)}, not a scenario ({', '.join(SCENARIOS)})")
+    if len(set(scenarios)) != len(scenarios):  # the same jobs twice: twice the rows, counted twice in the report
+        raise StudyError("'scenarios' lists a scenario twice")
     ts = data.get("time_scale", 1.0)
     if not (is_number(ts) and 0.05 <= ts <= 1.0):
         raise StudyError(f"'time_scale' must be a number from 0.05 to 1, got {short(ts)}")

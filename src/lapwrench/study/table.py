@@ -15,6 +15,7 @@ from typing import Any
 import pandas as pd
 
 FILE = "runs.parquet"
+STATUSES = ("ok", "failed")  # a row's status: its run finished, or its job raised
 
 
 class TableError(ValueError):
@@ -40,13 +41,19 @@ class ResultTable:
         self.rows: list[dict[str, Any]] = []
         if self.path.exists():
             try:
-                old = pd.read_parquet(self.path)
+                with open(self.path, "rb") as f:  # opened here: pyarrow takes only UTF-8 path names
+                    old = pd.read_parquet(f)
             except Exception as exc:
                 raise TableError(f"{self.path} is not a readable results table ({type(exc).__name__}); "
                                  "move it away to start over, or choose another --out") from exc
             if "run_id" not in old.columns or "status" not in old.columns:
                 raise TableError(f"{self.path} has no run_id/status columns: not a lapwrench study table")
             self.rows = [{k: v for k, v in r.items() if not _missing(v)} for r in old.to_dict("records")]
+            for i, r in enumerate(self.rows):
+                if not isinstance(r.get("run_id"), str) or r.get("status") not in STATUSES:
+                    raise TableError(f"{self.path} row {i} has run_id {str(r.get('run_id'))[:40]!r} and status "
+                                     f"{str(r.get('status'))[:40]!r} (text and one of {', '.join(STATUSES)}): "
+                                     "not a lapwrench study table; move it away or choose another --out")
         self.dirty = False
 
     @property
@@ -73,8 +80,9 @@ class ResultTable:
         if not self.dirty:
             return
         tmp = self.path.with_suffix(".parquet.tmp")
-        self.frame().to_parquet(tmp, index=False)
-        with open(tmp, "rb") as f:
+        with open(tmp, "wb") as f:  # opened here: pyarrow takes only UTF-8 path names (a folder named in
+            self.frame().to_parquet(f, index=False)  # Latin-1 lost every row of the sweep at its first save)
+            f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, self.path)
         self.dirty = False

@@ -52,7 +52,9 @@ def _reduce(values: list[float], how: str) -> float:
     finite = [v for v in values if math.isfinite(v)]
     if not finite:
         return math.nan
-    return float({"mean": np.mean, "max": np.max, "median": np.median}[how](finite))
+    if how == "max":
+        return float(np.max(finite))
+    return float(np.median(finite) if how == "median" else np.mean(finite))
 
 
 def score_rows(rows: list[dict], spec: TuneSpec) -> Evaluation:
@@ -112,8 +114,9 @@ class TuneOutcome:
 def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: int | None = None,
              progress: bool = True) -> TuneOutcome:
     """Search with Ray Tune (random search over ``spec.search``); write ``trials.parquet`` and, when
-    a trial met every constraint, ``best.yaml``. A KeyboardInterrupt (Ctrl-C) ends the search and
-    propagates, with nothing written."""
+    a trial met every constraint, ``best.yaml`` (when none did, an earlier search's ``best.yaml`` in
+    ``out`` is removed). A KeyboardInterrupt (Ctrl-C) ends the search and propagates, with nothing
+    written."""
     import ray
     from ray import tune
 
@@ -137,7 +140,8 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
     finally:
         ray.shutdown()
     trials = []
-    for result in grid:
+    for i in range(len(grid)):  # ray's ResultGrid is a sequence by __getitem__/__len__ (no __iter__ for mypy)
+        result = grid[i]
         m = result.metrics or {}
         row = {**{f"p.{k}": v for k, v in (result.config or {}).items()},
                **{k: m.get(k, math.nan) for k in ("score", "objective", "excess", "failed")},
@@ -147,10 +151,13 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
                "error": None if result.error is None else str(result.error).splitlines()[0][:300]}
         trials.append(row)
     trials.sort(key=lambda r: (r["score"] if isinstance(r["score"], float) and math.isfinite(r["score"]) else math.inf))
-    to_frame(trials).to_parquet(out / "trials.parquet", index=False)
+    with open(out / "trials.parquet", "wb") as f:  # opened here: pyarrow takes only UTF-8 path names
+        to_frame(trials).to_parquet(f, index=False)
     best = next((r for r in trials if r.get("feasible") is True), None)
     best_path = None
-    if best is not None:
+    if best is None:  # an earlier search's best.yaml is not this one's result
+        (out / "best.yaml").unlink(missing_ok=True)
+    else:
         cfg, _ = apply(spec.study.base, {k[2:]: v for k, v in best.items() if k.startswith("p.")})
         best_path = out / "best.yaml"
         config_mod.dump(cfg, best_path)

@@ -37,8 +37,8 @@ def plot_tradeoff(trials: Sequence[dict[str, Any]], spec: TuneSpec, path: Path) 
     if not pts:
         return False
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
-    for feasible, color, label in ((True, "tab:green", "meets every constraint"), (False, "tab:red", "breaks one")):
-        sel = [p for p in pts if p[2] is feasible]
+    for meets, color, label in ((True, "tab:green", "meets every constraint"), (False, "tab:red", "breaks one")):
+        sel = [p for p in pts if p[2] is meets]
         if sel:
             ax.scatter([p[0] for p in sel], [p[1] for p in sel], c=color, label=label, s=28)
     feasible = [p for p in pts if p[2]]

@@ -10,8 +10,8 @@
     detector: projected
     trials: 16                      # configurations tried
     search:                         # any config key (or world.*), each a distribution
-      interaction.k_t: {loguniform: [60, 300]}
-      rcm.K_p: {uniform: [1500, 4000]}
+      viscous.k_t: {loguniform: [60, 300]}
+      rcm.Kp: {uniform: [1500, 4000]}
     objective: {metric: completion_time_s, reduce: mean}     # minimised over the rows that have it
     constraints:                    # must hold in every row (every run of every scenario)
       - {metric: rcm_error_max_mm, max: 1.0}
@@ -101,7 +101,7 @@ def from_dict(data: Any, source: str = "tune") -> TuneSpec:
     search_in = data.get("search")
     if not isinstance(search_in, dict) or not search_in:
         raise StudyError("'search' must map parameter keys to distributions, e.g. "
-                         "interaction.k_t: {uniform: [60, 300]}")
+                         "viscous.k_t: {uniform: [60, 300]}")
     search: dict[str, Dist] = {}
     for key, d in search_in.items():
         try:

@@ -138,3 +138,72 @@ def test_a_damaged_chunk_in_a_truncated_log_is_corruption_not_data(
         load_log(path, allow_truncated=True)
     code, out, err = report(path, tmp_path / "report", capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "corrupt" in err and not out
+
+
+def foreign_log(path: Path, messages: dict[str, list[bytes]]) -> Path:
+    """An MCAP file of another program: JSON channels named like a lapwrench log's, holding ``messages``."""
+    from mcap.writer import Writer
+
+    with path.open("wb") as f:
+        writer = Writer(f)
+        writer.start(profile="", library="another program")
+        for topic, payloads in messages.items():
+            channel = writer.register_channel(topic=topic, message_encoding="json", schema_id=0)
+            for i, data in enumerate(payloads):
+                writer.add_message(channel, log_time=i, publish_time=i, data=data)
+        writer.finish()
+    return path
+
+
+@pytest.mark.parametrize(
+    ("topic", "data", "kind"),
+    [
+        (CYCLE_TOPIC, b"[1, 2, 3]", "a JSON array"),
+        (CYCLE_TOPIC, b'"a cycle"', "JSON text"),
+        (EVENT_TOPIC, b"5", "a JSON number"),
+        (runlog.META_TOPIC, b"null", "JSON null"),
+        (runlog.STATS_TOPIC, b"[]", "a JSON array"),
+    ],
+)
+def test_a_message_that_is_not_a_record_on_a_log_topic_is_refused(
+    tmp_path: Path, topic: str, data: bytes, kind: str
+) -> None:
+    """Another program's messages on the log's topic names reached log-report and identify-grip as lists
+    or text (an AttributeError there, a traceback in identify-grip): now the reader refuses the file."""
+    path = foreign_log(tmp_path / "foreign.mcap", {CYCLE_TOPIC: [b'{"t": 0.0}'], topic: [data]})
+    with pytest.raises(LogFileError, match=f"a {topic} message holds {kind}, not a record"):
+        load_log(path)
+    with pytest.raises(LogFileError, match=f"a {topic} message holds {kind}"):
+        list(runlog.iter_messages(path))
+    cut = tmp_path / "cut.mcap"  # the same read from the front, as a truncated file is
+    cut.write_bytes(path.read_bytes()[:-8])
+    with pytest.raises(LogFileError, match=f"a {topic} message holds {kind}"):
+        load_log(cut, allow_truncated=True)
+
+
+def test_a_path_the_system_cannot_stat_is_a_log_file_error(tmp_path: Path) -> None:
+    """A name longer than the file system allows raised OSError from Path.is_dir (a traceback in
+    identify-grip); an empty path was read as the current folder."""
+    with pytest.raises(LogFileError, match="cannot read"):
+        runlog.check_log_file(tmp_path / ("x" * 300 + ".mcap"))
+    with pytest.raises(LogFileError, match="no log file given"):
+        runlog.check_log_file("")
+
+
+def test_a_pipe_or_device_is_refused_without_reading_it(tmp_path: Path) -> None:
+    """A FIFO made the reader wait forever for a writer (log-report hung); /dev/zero was called empty."""
+    import os
+    import subprocess
+    import sys
+
+    fifo = tmp_path / "run.mcap"
+    os.mkfifo(fifo)
+    script = "import sys; from lapwrench.cli import main; sys.exit(main(sys.argv[1:]))"
+    for path in (fifo, Path("/dev/zero")):
+        proc = subprocess.run(
+            [sys.executable, "-c", script, "log-report", str(path), "--out", str(tmp_path / "report")],
+            capture_output=True, text=True, timeout=120,  # a hang fails here
+        )  # fmt: skip
+        assert proc.returncode == 2, proc.stderr
+        words = "not a regular file (a pipe, socket or device), not a log file"
+        assert proc.stderr == f"lapwrench log-report: {path}: {words}\n"

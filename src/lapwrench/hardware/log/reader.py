@@ -13,6 +13,8 @@ half-written is returned. :class:`Truncation` says where it stopped."""
 from __future__ import annotations
 
 import json
+import os
+import stat
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,17 +45,24 @@ class Truncation:
 
 
 def _log_file_size(p: Path) -> int:
-    """The size of an MCAP file that starts with the magic, else :class:`LogFileError`."""
-    if p.is_dir():
-        raise LogFileError(f"{p}: is a directory, not a log file")
-    if not p.exists():
-        raise LogFileError(f"{p}: no such log file")
+    """The size of an MCAP file that starts with the magic, else :class:`LogFileError`. Only a regular
+    file is opened: a FIFO would block the read until a writer came, a device (``/dev/zero``) has no end."""
     try:
-        size = p.stat().st_size
+        st = p.stat()
+    except FileNotFoundError:
+        raise LogFileError(f"{p}: no such log file") from None
+    except OSError as exc:  # a name too long, a symbolic link loop, a folder without permission
+        raise LogFileError(f"{p}: cannot read ({exc.strerror or exc})") from exc
+    if stat.S_ISDIR(st.st_mode):
+        raise LogFileError(f"{p}: is a directory, not a log file")
+    if not stat.S_ISREG(st.st_mode):
+        raise LogFileError(f"{p}: not a regular file (a pipe, socket or device), not a log file")
+    try:
         with p.open("rb") as f:
             head = f.read(len(_MCAP_MAGIC))
     except OSError as exc:
         raise LogFileError(f"{p}: cannot read ({exc.strerror or exc})") from exc
+    size = st.st_size
     if size == 0:
         raise LogFileError(f"{p}: empty file (0 bytes), not an MCAP log")
     if not _MCAP_MAGIC.startswith(head):
@@ -61,6 +70,13 @@ def _log_file_size(p: Path) -> int:
     if len(head) < len(_MCAP_MAGIC):
         raise LogFileError(f"{p}: truncated MCAP file ({size} bytes, cut inside the magic)")
     return size
+
+
+def display_path(path: str | Path) -> str:
+    """``path`` as text every terminal takes: bytes of the name that are not UTF-8 (which Python keeps as
+    lone surrogates) as ``\\xNN``. Printed as it is, such a path ends the program with a
+    UnicodeEncodeError when stdout is strict UTF-8 (a UTF-8 locale other than C.UTF-8)."""
+    return os.fsencode(str(path)).decode("utf-8", "backslashreplace")
 
 
 def _is_complete(p: Path, size: int) -> bool:
@@ -75,6 +91,8 @@ def _is_complete(p: Path, size: int) -> bool:
 def check_log_file(path: str | Path, *, allow_truncated: bool = False) -> Path:
     """``path`` if it is an MCAP file, else :class:`LogFileError`. A truncated one (no closing
     magic) is refused unless ``allow_truncated`` (then :func:`load_log` reads it as far as it goes)."""
+    if str(path) == "":  # Path("") is the current folder
+        raise LogFileError("no log file given (an empty path)")
     p = Path(path)
     size = _log_file_size(p)
     if not allow_truncated and not _is_complete(p, size):
@@ -240,7 +258,10 @@ def iter_messages(
             for schema, channel, message in reader.iter_messages(
                 topics=None if topics is None else list(topics), log_time_order=True
             ):
-                yield channel.topic, decoder.decode(schema, channel.message_encoding, message.data)
+                topic = channel.topic
+                yield topic, _record(p, topic, decoder.decode(schema, channel.message_encoding, message.data))
+    except LogFileError:
+        raise
     except Exception as exc:  # mcap, zstd/lz4, protobuf, JSON: the file's content is bad
         raise LogFileError(f"{p}: corrupt MCAP file ({type(exc).__name__}: {exc})") from exc
 
@@ -251,9 +272,24 @@ def _decoded(p: Path, read: _StreamRead) -> Iterator[tuple[str, Any]]:
     try:
         for m in read.messages:
             ch = read.channels[m.channel_id]
-            yield ch.topic, decoder.decode(read.schemas.get(ch.schema_id), ch.message_encoding, m.data)
+            yield ch.topic, _record(p, ch.topic, decoder.decode(read.schemas.get(ch.schema_id), ch.message_encoding,
+                                                                m.data))
+    except LogFileError:
+        raise
     except Exception as exc:  # protobuf, JSON
         raise LogFileError(f"{p}: corrupt MCAP file ({type(exc).__name__}: {str(exc)[:80]})") from exc
+
+
+def _record(p: Path, topic: str, value: Any) -> Any:
+    """``value``, checked where the log's own topics are concerned: a cycle, event, meta or stats message
+    is a record (a JSON object, or a cycle decoded to a dict). Anything else there (a list, text, a
+    number, undecoded bytes: another program's messages on the same topic names) is
+    :class:`LogFileError`, so no reader of the records meets a value of the wrong kind."""
+    if topic in _CONTENT_TOPICS and not isinstance(value, dict):
+        kinds = {bytes: "undecoded bytes", list: "a JSON array", str: "JSON text", type(None): "JSON null"}
+        kind = kinds.get(type(value), "a JSON number")
+        raise LogFileError(f"{p}: a {topic} message holds {kind}, not a record: not a lapwrench run log")
+    return value
 
 
 @dataclass
