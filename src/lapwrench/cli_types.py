@@ -325,3 +325,10 @@ def output_dir(text: str) -> str:
     if problem:
         raise argparse.ArgumentTypeError(f"{quote(text)} {problem}")
     return text
+
+
+def display_path(path: str | Path) -> str:
+    """``path`` as text every terminal takes: bytes of the name that are not UTF-8 (which Python keeps as
+    lone surrogates) as ``\\xNN``. Printed as it is, such a path ends the program with a
+    UnicodeEncodeError when stdout is strict UTF-8 (a UTF-8 locale other than C.UTF-8)."""
+    return os.fsencode(str(path)).decode("utf-8", "backslashreplace")

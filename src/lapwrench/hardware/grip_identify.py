@@ -34,9 +34,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from lapwrench import config as config_mod
-from lapwrench.cli_types import float_in
+from lapwrench.cli_types import display_path, float_in
 from lapwrench.hardware.grip_fit import GripFit, GripFitError, fit_grip
-from lapwrench.hardware.log.reader import LogFileError, check_log_file, display_path, iter_messages
+from lapwrench.hardware.log.reader import LogFileError, check_log_file, iter_messages
 from lapwrench.hardware.log.topics import CYCLE_TOPIC, META_TOPIC
 
 __all__ = [

@@ -44,8 +44,8 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     and arrays of the wrong shape or of values that are not real numbers give NaN (the supervisor then
     holds): a broken driver's reading is a hold, never a traceback in the loop.
     """
-    q = q_measured if _is_f64_c(q_measured) else real_vector(q_measured)
-    p = p_R if _is_f64_c(p_R) else real_vector(p_R)
+    q = q_measured if _is_f64_c(q_measured) else real_array(q_measured)
+    p = p_R if _is_f64_c(p_R) else real_array(p_R)
     if q is None or p is None or q.shape != (model.nq,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
     axis = model.scope_axis_into(q)  # the model's own arrays, used before its next evaluation
@@ -56,14 +56,6 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
 def _is_f64_c(x: object) -> bool:
     """``x`` is a C-contiguous float64 array (passed to a bound kernel as it is)."""
     return type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous
-
-
-def real_vector(x: object) -> np.ndarray | None:
-    """``x`` as a C-contiguous float64 array, or None when it does not hold real numbers (text, booleans,
-    objects, complex values: numpy would raise, or warn and drop the imaginary part), as the controller's
-    inputs are checked (:func:`lapwrench.inputs.real_array`). For the measured values the supervisor
-    watches, off the per-cycle fast path (float64 arrays are used as they are)."""
-    return real_array(x)
 
 
 @functools.cache

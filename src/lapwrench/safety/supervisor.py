@@ -47,6 +47,7 @@ import math
 
 import numpy as np
 
+from lapwrench.inputs import real_array
 from lapwrench.jit import bind
 from lapwrench.robot.limits import JointLimits
 from lapwrench.safety.checks import (
@@ -57,7 +58,6 @@ from lapwrench.safety.checks import (
     measured_joints_room,
     measured_step,
     nearest_limit,
-    real_vector,
     stop_reach,
 )
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
@@ -184,7 +184,7 @@ class SafetySupervisor(SupervisorWatches):
 
     def _resumed(self, q_cmd: object) -> object:
         """``q_cmd`` plus this cycle's share of the resume offset (quintic, from all of it to none)."""
-        q = real_vector(q_cmd)
+        q = real_array(q_cmd)
         if q is None or q.shape != self._resume_offset.shape:
             return q_cmd  # refused by the check as it is
         self._resume_left -= 1
@@ -205,7 +205,7 @@ class SafetySupervisor(SupervisorWatches):
     # -- checks -------------------------------------------------------------------------------
     def check_command(self, q_cmd: object) -> tuple[str, str] | None:
         """(kind, message) if ``q_cmd`` is not a valid next command after the history, else None."""
-        q = real_vector(q_cmd)  # None for text, objects or complex values
+        q = real_array(q_cmd)  # None for text, objects or complex values
         if q is None:
             return "command_invalid", "command is not numeric"
         if q.shape != self._q.shape:

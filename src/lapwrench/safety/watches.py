@@ -32,7 +32,8 @@ from collections import deque
 
 import numpy as np
 
-from lapwrench.safety.checks import measured_joints_room, measured_step, nearest_limit, real_vector
+from lapwrench.inputs import real_array
+from lapwrench.safety.checks import measured_joints_room, measured_step, nearest_limit
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.spatial import Vec
 
@@ -139,7 +140,7 @@ class SupervisorWatches:
         c = self.cfg
         qm: np.ndarray | None = q_measured
         if not (type(qm) is np.ndarray and qm.dtype == np.float64 and qm.flags.c_contiguous):
-            qm = real_vector(q_measured)
+            qm = real_array(q_measured)
         if qm is None:
             self._q_measured_seen = False
             self._hold(time, "joints_nonfinite", f"measured joints {q_measured!r:.80} are not real numbers")
@@ -187,7 +188,7 @@ class SupervisorWatches:
                 f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
             )
         if residual is not None:
-            r = residual if type(residual) is np.ndarray and residual.dtype == np.float64 else real_vector(residual)
+            r = residual if type(residual) is np.ndarray and residual.dtype == np.float64 else real_array(residual)
             if r is None:
                 self._hold(time, "residual_force", f"measured residual force {residual!r:.80} is not real numbers")
                 return

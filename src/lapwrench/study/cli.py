@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from lapwrench.cli_types import int_in, output_dir, positive_float
+from lapwrench.cli_types import display_path, int_in, output_dir, positive_float
 from lapwrench.config_yaml import cut, short
 
 ADDRESS_HELP = "an existing Ray cluster (HOST:PORT, or 'auto'); default: start Ray here, embedded"
@@ -54,9 +54,8 @@ def _utf8_arguments(args: argparse.Namespace) -> None:
         try:
             str(value).encode("utf-8")
         except UnicodeEncodeError:
-            shown = os.fsencode(str(value)).decode("utf-8", "backslashreplace")
-            raise StudyUsageError(f"{name} {cut(shown, 100)} is not UTF-8 text, which Ray needs on the command line; "
-                                  "rename it or choose another path") from None
+            raise StudyUsageError(f"{name} {cut(display_path(value), 100)} is not UTF-8 text, which Ray needs on the "
+                                  "command line; rename it or choose another path") from None
 
 
 def _prepare(args: argparse.Namespace, command: str) -> None:

@@ -13,7 +13,6 @@ half-written is returned. :class:`Truncation` says where it stopped."""
 from __future__ import annotations
 
 import json
-import os
 import stat
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -70,13 +69,6 @@ def _log_file_size(p: Path) -> int:
     if len(head) < len(_MCAP_MAGIC):
         raise LogFileError(f"{p}: truncated MCAP file ({size} bytes, cut inside the magic)")
     return size
-
-
-def display_path(path: str | Path) -> str:
-    """``path`` as text every terminal takes: bytes of the name that are not UTF-8 (which Python keeps as
-    lone surrogates) as ``\\xNN``. Printed as it is, such a path ends the program with a
-    UnicodeEncodeError when stdout is strict UTF-8 (a UTF-8 locale other than C.UTF-8)."""
-    return os.fsencode(str(path)).decode("utf-8", "backslashreplace")
 
 
 def _is_complete(p: Path, size: int) -> bool:

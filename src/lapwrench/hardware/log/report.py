@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from lapwrench.cli_types import output_dir
-from lapwrench.hardware.log.reader import LogContents, LogFileError, display_path, load_log
+from lapwrench.cli_types import display_path, output_dir
+from lapwrench.hardware.log.reader import LogContents, LogFileError, load_log
 from lapwrench.hardware.log.topics import CYCLE_TOPIC
 
 _QUIET_EVENTS = ("start", "deadline_miss", "log_dropped")
