@@ -433,6 +433,35 @@ def test_a_start_far_from_the_held_reference_starts_afresh(limits: JointLimits) 
     assert np.array_equal(s.filter(1.0, far), far)
 
 
+def test_a_supervisor_with_new_thresholds_continues_the_held_stream(limits: JointLimits) -> None:
+    """A parameter change (the UI's) builds a supervisor with new thresholds. A fresh one started from the
+    measured pose while the robot held the old one's last command (9x the jerk limit through the UI);
+    :meth:`continue_from` hands the held reference over, so the next start resumes from it."""
+    old, cmds = held_after_an_alarm(limits)
+    new = SafetySupervisor(limits, DT, SupervisorConfig(max_rcm_error=0.02))
+    new.continue_from(old)
+    measured = cmds[-1] + 2e-4
+    new.start(measured, time=1.0)
+    assert new.resume_cycles > 0 and not new.alarm
+    out = [new.filter(1.0 + k * DT, measured) for k in range(new.resume_cycles + 5)]
+    sent_inside_the_limits(cmds + out, limits, DEFAULT_Q0)
+    assert np.array_equal(out[-1], measured)
+
+
+def test_only_a_supervisor_at_rest_of_the_same_robot_is_handed_over(limits: JointLimits) -> None:
+    running = started(limits)
+    with pytest.raises(ValueError, match="at rest"):
+        SafetySupervisor(limits, DT).continue_from(running)
+    with pytest.raises(ValueError, match="at rest"):
+        SafetySupervisor(limits, DT).continue_from(SafetySupervisor(limits, DT))  # never started
+    held, _ = held_after_an_alarm(limits)
+    for other in (limits.scaled(0.5), RobotModel("fr3").limits):
+        with pytest.raises(ValueError, match="another robot"):
+            SafetySupervisor(other, DT).continue_from(held)
+    with pytest.raises(ValueError, match="another robot"):
+        SafetySupervisor(limits, 2 * DT).continue_from(held)
+
+
 @pytest.mark.parametrize("bad", [DEFAULT_Q0 + 0j, ["a"] * 7, np.array([object()] * 7)])
 def test_a_command_that_is_not_real_numbers_is_refused_without_a_warning(limits: JointLimits, bad: object) -> None:
     """A complex command was cast to its real part with a ComplexWarning (an exception where warnings are

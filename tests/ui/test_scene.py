@@ -12,7 +12,7 @@ from lapwrench.config import Config
 from lapwrench.sim.scene.build import build_scene
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.ui.scene import ARROW_SCALE, SceneDrawer, cue_color, force_segments, geom_color, geom_mesh
-from lapwrench.ui.session import Snapshot
+from lapwrench.ui.snapshot import Snapshot
 
 viser = pytest.importorskip("viser")
 

@@ -139,6 +139,39 @@ def test_a_parameter_change_is_applied_at_rest(session: Session, cfg: Config) ->
     assert session.held is None
 
 
+def test_a_parameter_change_sends_no_step_to_the_robot(session: Session, cfg: Config) -> None:
+    """The change built a fresh supervisor started at the measured pose while the robot held the old
+    reference, a tracking error away: 2.4x the acceleration and 9x the jerk limit in one cycle. Now the
+    arm is stopped to rest and the new supervisor resumes from the held reference."""
+    robot = session.closed.loop.robot
+    sent: list[np.ndarray] = []
+    command = robot.command
+
+    def record(q: np.ndarray) -> None:
+        sent.append(np.array(q, dtype=float))
+        command(q)
+
+    robot.command = record  # type: ignore[method-assign]
+    session.hand.set_grip_level("high")
+    session.hand.set_push(90.0, 10.0)
+    run(session, 0.3)
+    session.hand.release()
+    run(session, 0.2)
+    session.request_config(cfg.replace(viscous={"k_t": 60.0}))
+    run(session, 0.3)
+    assert not session.config_pending and session.held is None
+    assert session.closed.controller.cfg.viscous.k_t == 60.0
+    q = np.array(sent)
+    v = np.diff(q, axis=0) / 1e-3
+    a = np.diff(v, axis=0) / 1e-3
+    j = np.diff(a, axis=0) / 1e-3
+    lim = session.closed.controller.model.limits
+    assert np.max(np.abs(v) / lim.velocity) < 1.0
+    assert np.max(np.abs(a) / lim.acceleration) < 1.0
+    assert np.max(np.abs(j) / lim.jerk) < 1.0 + 1e-6
+    assert any(e.kind == "start" and "resumed" in e.message for e in session.closed.supervisor.events)
+
+
 def test_a_reset_applies_accepted_parameters_not_yet_applied(session: Session, cfg: Config) -> None:
     """Parameters accepted while the arm moved, then Reset: the reset dropped them silently, while the
     page's parameter line turned to 'Parameters applied.' (it watches ``config_pending``)."""

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from lapwrench.config import Config
-from lapwrench.ui.session import Session, Snapshot
+from lapwrench.ui.session import Session
+from lapwrench.ui.snapshot import Snapshot
 from lapwrench.ui.view import LaparoscopeView, annotate, next_due, view_size
 
 

@@ -166,6 +166,29 @@ class SafetySupervisor(SupervisorWatches):
         self._started = True
         self.event(time, "start", message)
 
+    def continue_from(self, other: SafetySupervisor) -> None:
+        """Take over ``other``'s command stream: a supervisor with new thresholds (a parameter change)
+        for the same robot, whose next :meth:`start` resumes from the reference ``other`` holds, as a
+        restart after a hold does (module docstring). A fresh supervisor would start its history at the
+        measured pose while the robot holds ``other``'s last command, a step of the tracking error
+        (0.9 mrad, 9x the jerk limit measured through the UI's parameter change).
+
+        Raises:
+            ValueError: ``other`` is not at rest (:attr:`at_rest`: stop it first) or watches other joints
+                or other limits.
+        """
+        if not (other._started and other.at_rest):
+            raise ValueError("the supervisor handed over must be at rest: stop it first")
+        same = other.n_joints == self.n_joints and all(
+            np.array_equal(a, b) for a, b in ((other._lo, self._lo), (other._hi, self._hi),
+                                              (other.limits.velocity, self.limits.velocity),
+                                              (other.limits.acceleration, self.limits.acceleration),
+                                              (other.limits.jerk, self.limits.jerk)))
+        if not same or other.dt != self.dt:
+            raise ValueError("the supervisor handed over watches another robot (joints, limits or period differ)")
+        self._history[:] = other._history
+        self._started, self.state = True, SupervisorState.HOLDING
+
     def _phase_out_cycles(self, offset: Vec) -> int:
         """Cycles of a minimum-jerk phase-out of ``offset`` using :data:`RESUME_FRACTION` of the limits
         (a quintic over T: peak speed 1.875 d/T, acceleration 5.774 d/T², jerk 60 d/T³)."""

@@ -27,7 +27,8 @@ from lapwrench.ui.inputs import (
 )
 from lapwrench.ui.playback import PLAYABLE
 from lapwrench.ui.runner import RealTimeRunner
-from lapwrench.ui.session import DETECTORS, INSTRUMENT_REACH, Session, Snapshot
+from lapwrench.ui.session import DETECTORS, INSTRUMENT_REACH, Session
+from lapwrench.ui.snapshot import Snapshot
 
 GIZMO_SCALE = 0.12  # m, the length of the handle gizmo's arrows in the scene
 

@@ -19,7 +19,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from lapwrench.ui.session import Snapshot
+from lapwrench.ui.snapshot import Snapshot
 
 ARROW_SCALE = 0.01  # m per N: a 10 N force is a 10 cm arrow
 # Arrows are re-sent when an end moved more than this (m; 0.2 N): the F/T noise alone would re-send

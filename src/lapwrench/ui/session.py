@@ -13,8 +13,11 @@ publisher (and the laparoscope view's frame copy). Keep it short: it runs inside
 
 A hold (a supervisor alarm) keeps the world running with the arm held; :meth:`Session.resume`
 restarts the control loop at the measured pose, the RCM point kept where the shaft meets it.
-A parameter change (:meth:`Session.request_config`) builds a new controller at once and swaps it in at
-the next tick at which the arm is at rest (or on resume), restarting the loop the same way.
+A parameter change (:meth:`Session.request_config`) builds a new controller at once. Once the arm is
+nearly at rest (:data:`AT_REST_SPEED`) the supervisor stops it fully (its jerk-limited stop, a few
+cycles), and the loop restarts with the new controller and a supervisor with the new thresholds that
+resumes from the reference the robot holds (:meth:`SafetySupervisor.continue_from`), so the command
+stream does not jump; while held, the change waits for the resume.
 """
 
 from __future__ import annotations
@@ -27,7 +30,6 @@ import numpy as np
 
 from lapwrench.config import Config
 from lapwrench.controller import Controller, TickResult
-from lapwrench.robot.description import FRAME_C, FRAME_H
 from lapwrench.safety.supervisor import SafetySupervisor, SupervisorConfig
 from lapwrench.sim.loop import ClosedLoop, SafetyStopError
 from lapwrench.sim.scripts import TISSUE_DEPTH, park_instrument
@@ -36,6 +38,7 @@ from lapwrench.sim.world import CONTROL_DT
 from lapwrench.ui.history import History, mode_index
 from lapwrench.ui.inputs import HandInput, HandWrenchCache, UiInputError, checked_choice, checked_number
 from lapwrench.ui.playback import PLAYABLE, ScriptPlayer, make_script
+from lapwrench.ui.snapshot import Snapshot, take_snapshot
 
 DETECTORS = ("projected", "shipped")
 """Instrument detectors offered on the page: projected simulator geometry (cheap) or the shipped YOLO."""
@@ -84,33 +87,6 @@ class InstrumentTarget:
     y: float = 0.0
 
 
-@dataclass(frozen=True)
-class Snapshot:
-    """What the page draws, taken in the sim thread (vectors in {B}, SI units)."""
-
-    t: float
-    mode: str
-    delta: float
-    held: str | None
-    alarms: tuple[str, ...]
-    body_pos: np.ndarray
-    body_quat: np.ndarray
-    hand_point: np.ndarray
-    hand_force: np.ndarray
-    cue_forces: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (point, force)
-    trocar_force: np.ndarray
-    incision: np.ndarray
-    p_R: np.ndarray
-    shaft_dir: np.ndarray
-    rcm_error_mm: float
-    disturbance: bool
-    script: bool
-    pending_config: bool
-    detections: tuple[tuple[tuple[float, float, float, float], tuple[float, float]], ...] = ()
-    script_name: str = ""  # the scenario playing (:data:`~lapwrench.ui.playback.PLAYABLE`), "" if none
-    script_time: float = 0.0  # s since it started
-
-
 @dataclass
 class _Requests:
     config: tuple[Config, Controller] | None = None
@@ -148,6 +124,7 @@ class Session:
         self._last: TickResult | None = None
         self._hand = HandWrenchCache()  # the page's hand as last set on the world
         self._hand_changed = False  # since the last snapshot
+        self._changing = False  # a parameter change is stopping the arm to rest (:meth:`_apply_requests`)
 
     # -- what the page asks -------------------------------------------------------------------
     @property
@@ -160,7 +137,8 @@ class Session:
 
     @property
     def config_pending(self) -> bool:
-        """A parameter change waits for the arm to come to rest (or for a resume)."""
+        """A parameter change waits for the arm to come (nearly) to rest, stops it there and restarts the loop
+        with the new parameters from the held reference (or waits for a resume)."""
         return self._req.config is not None
 
     def set_instrument(self, index: object, visible: object, x: object, y: object) -> None:
@@ -216,6 +194,7 @@ class Session:
         with self.lock:
             old, self.closed, self.detector = self.closed, closed, det
             self.held, self.alarms, self._last, self.snapshot = None, [], None, None
+            self._changing = False
             self._disturbance = self._script = None
             later = self._req.config if self._req.config is not pending else None  # asked during the build
             self._req, self.max_rcm_error = _Requests(config=later), 0.0
@@ -244,6 +223,9 @@ class Session:
 
     def _cycle(self, grip: float) -> TickResult | None:
         c = self.closed
+        if self._changing:
+            self._change_cycle()
+            return None
         if self.held is not None:
             c.loop.hold_cycle()  # the supervisor holds the arm; the world (hand, housing) goes on
             if self._disturbance is not None:
@@ -260,6 +242,24 @@ class Session:
             return None
         self._last = res
         return res
+
+    def _change_cycle(self) -> None:
+        """One cycle of the stop before a parameter change (the supervisor's jerk-limited stop, no
+        controller); at rest the loop restarts with the new parameters. An alarm during the stop holds the
+        arm as any alarm does; the change then waits for the resume."""
+        c = self.closed
+        c.loop.hold_cycle()
+        if self._disturbance is not None:
+            self._disturbance.apply(c.world, c.t)
+        c.t += CONTROL_DT
+        sup = c.supervisor
+        if sup.alarm:
+            self._changing = False
+            self.held = str(sup.alarm_reason)
+            self.alarms.append(f"t = {c.t:.3f} s: {sup.alarm_reason}")
+        elif sup.at_rest:
+            self._changing = False
+            self._restart()
 
     def _apply_hand(self) -> float:
         """The page's hand on the world, plus a playing scenario's (:mod:`lapwrench.ui.playback`). The
@@ -287,8 +287,9 @@ class Session:
         if r.resume and self.held is not None and c.supervisor.at_rest:
             self._restart()
         r.resume = False
-        if r.config is not None and self.held is None and self._at_rest():
-            self._restart()
+        if r.config is not None and self.held is None and not self._changing and self._at_rest():
+            c.supervisor.stop(c.loop.session_time(), "parameter change")  # restarted at rest (_change_cycle)
+            self._changing = True
         if r.disturbance is not None:
             self._disturbance = HousingDisturbance(start=c.t, shift=SHIFT) if r.disturbance else None
             if not r.disturbance:
@@ -313,6 +314,7 @@ class Session:
             r.config = None
             sup = SafetySupervisor(controller.model.limits, CONTROL_DT,
                                    SupervisorConfig.from_config(cfg, max_consecutive_misses=0))
+            sup.continue_from(c.supervisor)  # at rest: the restart resumes from the reference it holds
             c.cfg, c.controller, c.loop.controller = cfg, controller, controller
             c.supervisor, c.loop.supervisor = sup, sup
         try:
@@ -367,27 +369,7 @@ class Session:
         return out
 
     def _snapshot(self, rcm_error: float) -> Snapshot:
-        c, w, res = self.closed, self.closed.world, self._last
-        p_E, d = w.shaft_axis()
-        p_H, _ = w.frame_pose(FRAME_H)
-        points = {"interaction": p_H, "tracking": w.frame_pose(FRAME_C)[0]}
-        cues: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        if res is not None:
-            points["rcm"] = res.p_R
-            cues = {n: (points.get(n, res.p_G), np.asarray(v[3:], float).copy()) for n, v in res.wrenches.items()}
-        dets: tuple = ()
-        if c.detection is not None:
-            latest = c.detection.latest(c.t)
-            if latest is not None:
-                dets = tuple((tuple(map(float, x.box)), tuple(map(float, x.point))) for x in latest.detections)
-        return Snapshot(
-            t=c.t, mode="held" if self.held else c.last_mode, delta=0.0 if res is None else res.delta,
-            held=self.held, alarms=tuple(self.alarms[-5:]), body_pos=w.data.xpos.copy(),
-            body_quat=w.data.xquat.copy(), hand_point=p_H, hand_force=w.hand_force(), cue_forces=cues,
-            trocar_force=w.contact_force(), incision=w.incision_position(),
-            p_R=p_E if res is None else res.p_R.copy(), shaft_dir=d, rcm_error_mm=rcm_error * 1e3,
-            disturbance=self._disturbance is not None, script=self._script is not None,
-            pending_config=self._req.config is not None, detections=dets,
-            script_name="" if self._script is None else self._script.name,
-            script_time=0.0 if self._script is None else self._script.elapsed(c.t),
+        return take_snapshot(
+            self.closed, self._last, held=self.held, alarms=self.alarms, rcm_error=rcm_error,
+            disturbance=self._disturbance is not None, script=self._script, pending_config=self._req.config is not None,
         )

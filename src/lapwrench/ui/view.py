@@ -26,7 +26,8 @@ from lapwrench.config import Config, from_dict, to_dict
 from lapwrench.controller import TickResult
 from lapwrench.sim.scene.names import CAMERA_NAME
 from lapwrench.spawn import quiet_process, start_quiet
-from lapwrench.ui.session import Session, Snapshot
+from lapwrench.ui.session import Session
+from lapwrench.ui.snapshot import Snapshot
 
 MIN_FPS = 5.0  # the view's lowest frame rate when the simulation falls behind
 RENDER_NICE = 5  # the render process's niceness above the simulation's: on a busy machine frames wait
