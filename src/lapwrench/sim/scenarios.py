@@ -52,18 +52,24 @@ def _pixel_error(loop: ClosedLoop, index: int) -> float:
 # --------------------------------------------------------------------------- grip (Fig. 4)
 
 
+MIN_ADJUSTMENT_DEG = 2.0
+"""The shortest view adjustment ``grip`` makes: twice the scripted hand's 1° tolerance. Below it the view
+already counted as adjusted and the runs were empty (a report of zeros at ``--time-scale`` 0.1)."""
+
+
 def grip(cfg: Config, opts: ScenarioOptions = DEFAULT_OPTIONS) -> ScenarioResult:
     """Same 10° view adjustment from the same pose at three grip forces; completion times.
 
-    ``time_scale`` < 1 shortens the adjustment to 10° x time_scale."""
+    ``time_scale`` < 1 shortens the adjustment to 10° x time_scale, at least :data:`MIN_ADJUSTMENT_DEG`."""
     runs = []
     times: list[float | None] = []  # completion times, None: not completed
     levels = [("high", 30.0), ("medium", 17.0), ("low", 5.0)]
-    limit = 60.0 * opts.time_scale
+    scale = max(opts.time_scale, MIN_ADJUSTMENT_DEG / 10.0)
+    limit = 60.0 * scale
     for label, grip_force in levels:
         loop = ClosedLoop(cfg, seed=opts.seed, world=opts.world)
         park_instruments(loop.world)
-        hand = ViewAdjustment(grip_force, 10.0 * opts.time_scale, opts.world).start(loop.world)
+        hand = ViewAdjustment(grip_force, 10.0 * scale, opts.world).start(loop.world)
         trace = Trace()
         t0 = time.perf_counter()
         while loop.t < limit and (hand.engaged or loop.t < (hand.done_time or 0) + 0.5):
