@@ -70,3 +70,24 @@ def test_the_snapshot_strip_shows_at_most_six_frames(tmp_path: Path, count: int,
 
 
 # -- notes -------------------------------------------------------------------------------------------
+
+
+def test_each_tracking_scenario_names_its_own_paper_figure() -> None:
+    """The workflow's plot said "paper Fig. 7b" (the needle search's figure); it is Fig. 9."""
+    assert plots.tracking_title("workflow") == "workflow: applied wrenches (paper Fig. 9)"
+    assert plots.tracking_title("needle-search") == "needle-search: applied wrenches (paper Fig. 7b)"
+    assert plots.tracking_title("mine") == "mine: applied wrenches"
+
+
+@pytest.mark.parametrize(
+    ("values", "scaled", "peak"),
+    [
+        (np.array([0.0, 0.005, -0.01]), np.array([0.0, 0.5, -1.0]), 0.01),  # metres beside newtons: visible
+        (np.array([0.0, 40.0, np.nan, np.inf]), np.array([0.0, 1.0, np.nan, np.inf]), 40.0),
+        (np.zeros(3), np.zeros(3), 1.0),
+        (np.full(2, np.nan), np.full(2, np.nan), 1.0),
+    ],
+)
+def test_telemetry_is_drawn_over_its_peak(values: np.ndarray, scaled: np.ndarray, peak: float) -> None:
+    out, p = plots.scaled_to_peak(values)
+    assert p == peak and np.array_equal(out, scaled, equal_nan=True)

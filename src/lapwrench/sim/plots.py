@@ -43,7 +43,7 @@ def _mode_band(ax: plt.Axes, t: np.ndarray, modes: np.ndarray) -> None:
             start = k
     ax.set_yticks([])
     handles = [plt.Rectangle((0, 0), 1, 1, color=MODE_COLORS[m]) for m in MODES]
-    ax.legend(handles, MODES, loc="upper center", ncol=5, fontsize=7, bbox_to_anchor=(0.5, -0.35))
+    ax.legend(handles, MODES, loc="upper center", ncol=5, fontsize=7, bbox_to_anchor=(0.5, -0.75), frameon=False)
 
 
 def plot_grip(res: ScenarioResult, out: Path) -> list[str]:
@@ -90,6 +90,25 @@ def plot_disturbance(res: ScenarioResult, out: Path) -> list[str]:
     return [_save(fig, out / "rcm_disturbance.png")]
 
 
+PAPER_FIGURES = {"needle-search": "paper Fig. 7b", "workflow": "paper Fig. 9"}
+"""The paper's figure each tracking scenario reproduces."""
+
+
+def tracking_title(name: str) -> str:
+    """The title of a tracking scenario's wrench panel, naming the paper's figure when there is one."""
+    fig = PAPER_FIGURES.get(name)
+    return f"{name}: applied wrenches" + (f" ({fig})" if fig else "")
+
+
+def scaled_to_peak(values: np.ndarray) -> tuple[np.ndarray, float]:
+    """``values`` divided by their largest finite magnitude, and that magnitude (1 when there is none):
+    telemetry fields of different units share one panel by shape, their peaks named in the legend."""
+    v = np.asarray(values, dtype=float)
+    finite = np.abs(v[np.isfinite(v)])
+    peak = float(finite.max()) if finite.size else 0.0
+    return (v / peak if peak > 0 else v), (peak if peak > 0 else 1.0)
+
+
 def plot_tracking_run(res: ScenarioResult, out: Path, stem: str) -> list[str]:
     tr = res.runs[0].trace
     t = tr["t"]
@@ -98,7 +117,7 @@ def plot_tracking_run(res: ScenarioResult, out: Path, stem: str) -> list[str]:
     a0 = fig.add_subplot(gs[0, 0])
     a0.plot(t, np.linalg.norm(tr["W_h"][:, 3:], axis=1), label="|F_h| (handle, eq 6)")
     a0.plot(t, np.linalg.norm(tr["W_c"][:, 3:], axis=1), label="|F_c| (tracking, eq 8)")
-    a0.set(ylabel="wrench force (N)", title=f"{res.name}: applied wrenches (paper Fig. 7b)")
+    a0.set(ylabel="wrench force (N)", title=tracking_title(res.name))
     a0.legend(fontsize=8)
     a1 = fig.add_subplot(gs[1, 0], sharex=a0)
     a1.plot(t, tr["rcm_error_phys"] * 1e3, label="physical RCM error (mm)")
@@ -149,10 +168,15 @@ def plot_cues(res: ScenarioResult, out: Path, stem: str) -> list[str]:
         row[0].legend(fontsize=7, ncol=3)
         if with_telemetry:
             for key in telemetry:
-                row[1].plot(t, tr[key], label=key.removeprefix("cue:"), lw=1)
-            row[1].set(title="cue telemetry")
+                scaled, peak = scaled_to_peak(tr[key])
+                row[1].plot(t, scaled, label=f"{key.removeprefix('cue:')} (peak {peak:.3g})", lw=1)
+            row[1].set(title="cue telemetry, each field over its peak |value|", ylabel="value / peak")
             if telemetry:
                 row[1].legend(fontsize=7)
+            else:
+                row[1].text(0.5, 0.5, "no telemetry in this run", ha="center", va="center",
+                            transform=row[1].transAxes, color="0.4")
+                row[1].set(xticks=[], yticks=[], ylabel="")
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     return [_save(fig, out / f"{stem}_cues.png")]
