@@ -8,6 +8,7 @@ what they remember between cycles, and what a malformed measurement does.
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -18,7 +19,7 @@ from lapwrench.robot.limits import JointLimits
 from lapwrench.robot.model import RobotModel
 from lapwrench.safety.config import SupervisorConfig, SupervisorState
 from lapwrench.safety.supervisor import SafetySupervisor
-from lapwrench.safety.watches import CONTROLLER_STOP_TIMEOUT, SupervisorWatches
+from lapwrench.safety.watches import CONTROLLER_STOP_TIMEOUT, SupervisorWatches, real_scalar
 from lapwrench.virtual import DEFAULT_Q0
 
 DT = 1e-3
@@ -115,6 +116,37 @@ def test_a_measured_alarm_is_logged_once_while_the_excursion_lasts(limits: Joint
         s.filter(k * DT, DEFAULT_Q0, rcm_error=0.05, depth=0.5)  # both out of bounds, every cycle
     assert s.alarm_reason.startswith("rcm_error: measured RCM error 50.00 mm")
     assert kinds(s).count("rcm_error") == 1 and "insertion_depth" not in kinds(s)
+
+
+@pytest.mark.parametrize(("watched", "kind"), [
+    ({"rcm_error": "0.001"}, "rcm_error"), ({"depth": [0.05, 0.06]}, "insertion_depth"),
+    ({"rcm_error": 1e-3 + 0j}, "rcm_error"), ({"depth": True}, "insertion_depth"),
+])
+def test_a_measured_value_that_is_not_one_real_number_holds(limits: JointLimits, watched: dict, kind: str) -> None:
+    """Text raised a TypeError inside the gate; a list, complex or boolean value is no measurement either."""
+    s = started(limits)
+    s.filter(0.0, DEFAULT_Q0, **{**SCOPE_OK, **watched})
+    assert s.alarm_reason.startswith(kind)
+
+
+@pytest.mark.parametrize("busy", ["0.0001", None, [1e-4, 1e-4]])
+def test_a_busy_time_that_is_not_one_real_number_is_a_miss(limits: JointLimits, busy: object) -> None:
+    s = started(limits)
+    s.filter(0.0, DEFAULT_Q0, compute_time=1e-4)
+    assert s.deadline_misses == 0
+    if busy is None:  # None skips the watch, as documented
+        s.filter(DT, DEFAULT_Q0, compute_time=busy)
+        assert s.deadline_misses == 0
+        return
+    s.filter(DT, DEFAULT_Q0, compute_time=busy)  # type: ignore[arg-type]
+    assert s.deadline_misses == 1 and not s.alarm
+
+
+def test_real_scalar_takes_one_real_number_only() -> None:
+    assert real_scalar(0.5) == 0.5 and real_scalar(2) == 2.0 and real_scalar(np.float32(0.25)) == 0.25
+    assert real_scalar(np.array([3.0])) == 3.0
+    for bad in ("1", b"1", True, 1j, [1.0, 2.0], None, object(), np.zeros(0)):
+        assert math.isnan(real_scalar(bad)), bad
 
 
 def test_a_near_joint_limit_is_logged_once_per_approach(limits: JointLimits) -> None:

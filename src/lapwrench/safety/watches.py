@@ -44,6 +44,18 @@ CONTROLLER_STOP_TIMEOUT = 1.0
 MAX_GAP_CYCLES = 20.0
 
 
+def real_scalar(x: object) -> float:
+    """``x`` as a float if it is one real number (an int, a float or a one-element array of them), else
+    NaN: a measured value that is text, a boolean, complex or several values counts as not measured
+    correctly, which every watch treats as out of bounds (before, text raised a TypeError in the gate)."""
+    if type(x) is float:
+        return x  # the common case
+    a = real_array(x)
+    if a is None or a.size != 1:
+        return math.nan
+    return float(a.reshape(()))
+
+
 def _rate_limited(count: int) -> bool:
     """Log the first 10 occurrences, then every 1000th."""
     return count <= 10 or count % 1000 == 0
@@ -176,6 +188,8 @@ class SupervisorWatches:
 
     def _watch_scope(self, time: float, rcm_error: float | None, depth: float | None, residual: Vec | None) -> None:
         c = self.cfg
+        rcm_error = None if rcm_error is None else real_scalar(rcm_error)
+        depth = None if depth is None else real_scalar(depth)
         if rcm_error is not None and not (rcm_error <= c.max_rcm_error):  # NaN fails the test too
             self._hold(
                 time, "rcm_error", f"measured RCM error {rcm_error * 1e3:.2f} mm > {c.max_rcm_error * 1e3:.2f} mm"
@@ -229,6 +243,7 @@ class SupervisorWatches:
 
     def _watch_deadline(self, time: float, compute_time: float) -> None:
         c = self.cfg
+        compute_time = real_scalar(compute_time)
         if not compute_time <= c.cycle_budget:  # a NaN compute time is a miss: it was not measured in time
             self.deadline_misses += 1
             self.consecutive_misses += 1
