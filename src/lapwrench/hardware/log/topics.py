@@ -26,12 +26,10 @@ STATS_SCHEMA: dict[str, Any] = {
     "type": "object",
     "properties": {
         k: {"type": "integer"}
-        for k in ("cycles", "dropped", "events", "dropped_events", "images", "dropped_images", "transforms", "errors",
-                  "bad_times")
+        for k in ("cycles", "dropped", "events", "dropped_events", "images", "dropped_images", "transforms", "errors")
     }
     | {
         "first_error": {"type": ["string", "null"]},
-        "first_bad_time": {"type": ["string", "null"]},
         "capacity": {"type": "integer"},
         "transform_rate_hz": {"type": "number"},
     },
