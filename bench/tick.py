@@ -15,6 +15,12 @@ off, SCHED_FIFO when permitted). ``tick_p50_us``/``tick_p99_us`` are the ``loop`
 setting the tick runs under on a robot; ``plain_*`` are the others. computeAllTerms is timed under
 the ``loop`` setting too.
 
+The machine's own tail (``fixed_*``): after each ``loop`` tick, a fixed compiled loop that allocates nothing and
+lasts about as long as the tick (:func:`fixed_work`) is timed too. Its p99 over its p50 is what the machine
+does to any computation of the tick's length; a tick whose p99/p50 is no larger has no tail of its own. (On
+the development VM, 2026-12-03 at load 7-8, a SCHED_FIFO loop lost the CPU for more than 20 µs 280-480
+times a second, median 25-33 µs: about one 100 µs run in 25 is hit.)
+
     python bench/tick.py [--ticks N] [--robot panda|fr3|ur5|xarm7]
 """
 
@@ -95,6 +101,28 @@ def _frame(v: Variant, k: int, rng: np.random.Generator, tactile: TactileReading
 BLOCK = 1000  # ticks per block; the blocks alternate between the plain and the loop setting
 
 
+@kernel
+def fixed_work(a: np.ndarray, n: int) -> float:
+    """The same arithmetic every call, in registers and ``a`` (nothing allocated): the machine's reference."""
+    s = 0.0
+    for k in range(n):
+        for i in range(a.shape[0]):
+            s += a[i] * (1.0 + 1e-9 * k)
+    return s
+
+
+def fixed_repeats(target_ns: float, a: np.ndarray) -> int:
+    """How many repeats make :func:`fixed_work` last about ``target_ns`` (its median over a few calls)."""
+    fixed_work(a, 1)
+    clock = time.perf_counter_ns
+    samples = []
+    for _ in range(200):
+        t0 = clock()
+        fixed_work(a, 100)
+        samples.append(clock() - t0)
+    return max(1, round(100 * target_ns / float(np.median(samples))))
+
+
 class LoopSetting:
     """Switch between the plain setting and the 1 kHz loop's (collector frozen and off, SCHED_FIFO
     when permitted); :attr:`problems` says what was not permitted."""
@@ -119,11 +147,12 @@ class LoopSetting:
             self._fifo = False
 
 
-def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> dict[str, Variant]:
+def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> tuple[dict[str, Variant], list[int]]:
     """Two controllers ticked in turn, so a machine that speeds up or slows down affects both alike:
     a light hand, and a 30 N axial push (the push run keeps its saturating ticks' inputs). Blocks of
     :data:`BLOCK` ticks alternate between the plain and the loop setting; each setting gets ``ticks``
-    timed ticks after 1000 untimed ones."""
+    timed ticks after 1000 untimed ones. Also returns the times (ns) of :func:`fixed_work`, run after
+    each ``loop`` tick of the light hand for about as long as that tick's median in the untimed block."""
     variants = {}
     for name, push in (("tick", 0.0), ("push", 30.0)):
         ctrl = Controller(cfg)
@@ -133,11 +162,16 @@ def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> dict[str,
     tactile = TactileReading(np.full(64, 62.5))
     clock = time.perf_counter_ns
     blocks = 1 + 2 * -(-ticks // BLOCK)  # one untimed warm-up block, then plain/loop pairs
+    warm_ns: list[int] = []
+    fixed_ns: list[int] = []
+    work, repeats = np.ones(64), 1
     for k in range(blocks * BLOCK):
         block, timed = divmod(k, BLOCK)[0], k >= BLOCK
         in_loop = block % 2 == 0
         if k % BLOCK == 0:
             setting.enter() if in_loop else setting.leave()
+        if k == BLOCK:
+            repeats = fixed_repeats(float(np.median(warm_ns)), work)
         for name, v in variants.items():
             frame = _frame(v, k, rngs[name], tactile)
             ref = v.ctrl.ref
@@ -146,7 +180,9 @@ def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> dict[str,
             t0 = clock()
             res = v.ctrl.tick(frame)
             dt_ns = clock() - t0
-            if timed and not in_loop:
+            if not timed and name == "tick":
+                warm_ns.append(dt_ns)
+            elif timed and not in_loop:
                 v.plain_ns.append(dt_ns)
             elif timed:
                 v.tick_ns.append(dt_ns)
@@ -154,7 +190,11 @@ def time_interleaved(cfg: Config, ticks: int, setting: LoopSetting) -> dict[str,
                 if res.limits_active and name == "push" and len(v.saturating) < 5000:
                     sat = v.ctrl.compiled.sat  # type: ignore[union-attr]
                     v.saturating.append((SaturationInputs(*(a.copy() for a in sat)), Minv, ref.q, ref.dq))
-    return variants
+                if name == "tick":
+                    t0 = clock()
+                    fixed_work(work, repeats)
+                    fixed_ns.append(clock() - t0)
+    return variants, fixed_ns
 
 
 def time_steps(v: Variant, repeats: int) -> tuple[list[int], list[int], int]:
@@ -197,7 +237,7 @@ def main() -> None:
 
 
 def _run(args: argparse.Namespace, cfg: Config, setting: LoopSetting) -> None:
-    variants = time_interleaved(cfg, args.ticks, setting)
+    variants, fixed_ns = time_interleaved(cfg, args.ticks, setting)
     setting.enter()  # computeAllTerms and the saturation replays under the loop's setting
     ctrl = variants["tick"].ctrl
     tick_ns, push_ns = variants["tick"].tick_ns, variants["push"].tick_ns
@@ -221,6 +261,7 @@ def _run(args: argparse.Namespace, cfg: Config, setting: LoopSetting) -> None:
     tick50, tick99 = percentiles_us(tick_ns)
     plain50, plain99 = percentiles_us(variants["tick"].plain_ns)
     cat50, cat99 = percentiles_us(cat_ns)
+    fixed50, fixed99 = percentiles_us(fixed_ns)
     push50, push99 = percentiles_us(push_ns)
     step50, step99 = percentiles_us(step_ns)
     cstep50, cstep99 = percentiles_us(clamp_step_ns)
@@ -231,6 +272,9 @@ def _run(args: argparse.Namespace, cfg: Config, setting: LoopSetting) -> None:
     print(f"controller tick      p50 {plain50:8.1f} us   p99 {plain99:8.1f} us (plain: collector on, normal sched.)")
     print(f"computeAllTerms      p50 {cat50:8.1f} us   p99 {cat99:8.1f} us")
     print(f"ratio tick/CAT       p50 {tick50 / cat50:8.1f} x    p99 {tick99 / cat99:8.1f} x")
+    print(f"fixed workload       p50 {fixed50:8.1f} us   p99 {fixed99:8.1f} us"
+          " (allocates nothing, about the tick's length: the machine's tail)")
+    print(f"p99 / p50            tick {tick99 / tick50:5.2f}    fixed workload {fixed99 / fixed50:5.2f}")
     print(f"30 N axial push      p50 {push50:8.1f} us   p99 {push99:8.1f} us ({push_active:.0%} of ticks at a limit)")
     print(f"saturation step      p50 {step50:8.1f} us   p99 {step99:8.1f} us on {len(recorded)} recorded pushing ticks"
           f" ({solved} solved compiled, the rest left to Python)")
@@ -250,6 +294,8 @@ def _run(args: argparse.Namespace, cfg: Config, setting: LoopSetting) -> None:
                 "compute_all_terms_p99_us": round(cat99, 2),
                 "tick_over_cat_p50_x": round(tick50 / cat50, 2),
                 "tick_over_cat_p99_x": round(tick99 / cat99, 2),
+                "fixed_p50_us": round(fixed50, 2),
+                "fixed_p99_us": round(fixed99, 2),
                 "push_tick_p50_us": round(push50, 2),
                 "push_tick_p99_us": round(push99, 2),
                 "push_limit_active_fraction": round(push_active, 3),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -63,3 +64,13 @@ def test_real_array_and_fresh_stamp() -> None:
     assert real_array([True, False]) is None and real_array("abc") is None and real_array([[1], [1, 2]]) is None
     assert real_array([1, 2]) is not None
     assert fresh_stamp(1.0, 1.05, 0.1) and not fresh_stamp(1.0, 1.2, 0.1) and not fresh_stamp(True, 1.0, 0.1)
+
+
+def test_real_array_hands_on_a_float64_array_with_an_equal_dtype_of_its_own_as_it_is() -> None:
+    """Arrays from numba's cached kernels (the controller's reference, checked by the supervisor every cycle)
+    carry a float64 dtype equal to numpy's but not the same object, as an unpickled dtype does: no copy."""
+    own = pickle.loads(pickle.dumps(np.dtype(np.float64)))
+    a = np.empty(7, dtype=own)
+    a[:] = 1.0
+    assert a.dtype is own and own is not np.dtype(np.float64)
+    assert real_array(a) is a

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 from collections.abc import Callable
 
 import numpy as np
@@ -50,6 +51,25 @@ def _arrays(out: object) -> list[np.ndarray]:
 
 def test_valid_readings_pass_on_as_they_are(validator: InputValidator) -> None:
     frame = _frame()
+    out = validator.validate(frame)
+    assert out.events == []
+    assert out.ft is frame.ft and out.tactile is frame.tactile
+    assert out.instruments is frame.instruments and out.robot is frame.robot
+
+
+def test_readings_with_an_equal_float64_dtype_of_their_own_pass_on_as_they_are(validator: InputValidator) -> None:
+    """Arrays from numba's cached kernels (the controller's reference, fed back as the robot reading) carry a
+    float64 dtype equal to numpy's but not the same object, as an unpickled dtype does: passed on as they are,
+    not converted every tick."""
+    own = pickle.loads(pickle.dumps(np.dtype(np.float64)))
+
+    def make(values: object) -> np.ndarray:
+        a = np.empty(np.shape(values), dtype=own)
+        a[...] = values
+        return a
+
+    frame = _frame(make)
+    assert all(a.dtype is own for a in _arrays(frame)) and own is not np.dtype(np.float64) and own == np.float64
     out = validator.validate(frame)
     assert out.events == []
     assert out.ft is frame.ft and out.tactile is frame.tactile

@@ -72,12 +72,12 @@ class _Extra(NamedTuple):
     faults: tuple[str, ...]  # cues whose output was dropped this tick (non-finite), and why
 
 
-_F64 = np.dtype(np.float64)
+_F64 = np.dtype(np.float64)  # compared with ==: arrays from numba's cached kernels carry an equal one of their own
 
 
 def _f64(x: object) -> Vec:
     """A C-contiguous float64 array (itself when it is one already): the bound argument type."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.flags.c_contiguous:
+    if type(x) is np.ndarray and x.dtype == _F64 and x.flags.c_contiguous:
         return x  # the common case (validated readings), checked cheaply
     return np.ascontiguousarray(x, dtype=np.float64)
 

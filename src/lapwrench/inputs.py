@@ -27,14 +27,14 @@ from lapwrench.spatial import Vec
 BUILT_IN_INPUTS = ("ft", "tactile", "instruments")
 """The inputs the core reads itself (the handle F/T, the tactile grip, the instrument detections)."""
 
-_F64 = np.dtype(np.float64)
+_F64 = np.dtype(np.float64)  # compared with ==: arrays from numba's cached kernels carry an equal one of their own
 MAX_INPUT_VALUES = 4096  # a registered input's reading: a shared-memory slot of at most this many doubles
 
 
 def real_array(x: object) -> np.ndarray | None:
     """``x`` as a C-contiguous float64 array if it holds real numbers (ints or floats; not strings,
     booleans, complex values or objects), else None."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.flags.carray:  # C-contiguous, aligned, writeable
+    if type(x) is np.ndarray and x.dtype == _F64 and x.flags.carray:  # C-contiguous, aligned, writeable
         return x  # the common case, checked cheaply
     try:
         a = np.asarray(x)

@@ -94,12 +94,14 @@ class ValidInputs:
     extra: dict[str, Reading] = field(default_factory=dict)  # registered inputs that passed their spec
 
 
+# Compared with ==, not is: arrays from numba's cached kernels (the tick's own reference, fed back as the
+# robot reading) carry an equal float64 dtype of their own, and would take the converting path every tick.
 _F64 = np.dtype(np.float64)
 
 
 def _vector(x: object, n: int) -> Vec | None:
     """``x`` as a C-contiguous float vector of length n, or None if it is not one."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.ndim == 1 and len(x) == n and x.flags.carray:
+    if type(x) is np.ndarray and x.dtype == _F64 and x.ndim == 1 and len(x) == n and x.flags.carray:
         return x  # the common case, checked cheaply (no shape tuple built)
     if (x.size if isinstance(x, np.ndarray) else len(x) if isinstance(x, list | tuple) else n) != n:
         return None  # refused before a copy: a reading of 10^7 values must not cost the tick its conversion

@@ -178,12 +178,12 @@ def fill_scope_axis(out: ScopeAxis, R_E: Mat, p_E: Vec) -> None:
     out.P[:] = P
 
 
-_F64 = np.dtype(np.float64)
+_F64 = np.dtype(np.float64)  # compared with ==: the tick's reference (numba's cached kernels) has an equal one
 
 
 def _vector_arg(x: object, n: int, what: str) -> Vec:
     """``x`` as a C-contiguous float64 vector of length n (itself when it is one already)."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.ndim == 1 and len(x) == n and x.flags.c_contiguous:
+    if type(x) is np.ndarray and x.dtype == _F64 and x.ndim == 1 and len(x) == n and x.flags.c_contiguous:
         return x  # the common case, checked cheaply (no shape tuple built)
     a = np.ascontiguousarray(x, dtype=np.float64)
     if a.shape != (n,):
