@@ -27,11 +27,23 @@ longest run of consecutive misses, the F/T sample fresh fraction (the newest F/T
 real-time factor. franky-sim is a Python server on the same two cores, so the *cycle* time is
 bounded by its pace, not by the controller; a real Franka sets a hard 1 ms cycle. The last line is
 one JSON object with unit-suffixed keys.
+
+Where the busy time goes (:func:`phases`, from each cycle's read and command stamps): the wait in
+``readOnce``, the command's own time, the tail from the command's return to the next read (the hooks,
+the log, the run's bookkeeping), the busy time recomputed as the loop counts it (``busy_full_*``), each
+miss put down to the part furthest above its median (``misses_led_by``: the tick, the rest of the
+compute, the filter, the hooks, the rest of the tail), and the misses whose state came more than
+5 ms late (``misses_after_a_late_state``: franky-sim stalled, and the loop caught up on the F/T socket
+before its tick). The loop thread's page faults and involuntary switches are counted inside the
+cycling only. ``--lock-memory`` (on by default, as ``lapwrench run``) locks the loop's memory;
+``--rt-cpus 1 --others-cpus 0`` leaves CPU 1 to the loop and puts franky-sim, the F/T box, this process
+and the detector on CPU 0.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import os
@@ -54,13 +66,21 @@ def hand_force(t: float) -> np.ndarray:
 
 
 class TickTimer:
-    """Installed in the real-time child (``RtSpec.loop_hook``): times ``controller.tick``."""
+    """Installed in the real-time child (``RtSpec.loop_hook``): times ``controller.tick``, stamps each cycle's
+    read (call, return) and command (call, return), and counts the loop thread's page faults and involuntary
+    context switches from its first cycle to its last thousandth (its start and end left out)."""
+
+    N = 200_000
 
     def __init__(self, loop: Any) -> None:
-        self.times = np.zeros(200_000)
+        self.times = np.zeros(self.N)
         self.n = 0
-        tick = loop.controller.tick
-        perf = time.perf_counter
+        self.stamps = np.zeros((self.N, 4))  # perf_counter: read call, read return, command call, command return
+        self.k = 0
+        self.usage: list[Any] = []  # the thread's rusage at the first cycle, then at every thousandth
+        tick, robot = loop.controller.tick, loop.robot
+        read, command = robot.read, robot.command
+        perf, usage, thread = time.perf_counter, resource.getrusage, resource.RUSAGE_THREAD
 
         def timed(frame: Any) -> Any:
             t0 = perf()
@@ -71,13 +91,79 @@ class TickTimer:
                     self.times[self.n] = perf() - t0
                     self.n += 1
 
+        def timed_read() -> Any:
+            k = self.k
+            if k % 1000 == 1:
+                self.usage[1:] = [usage(thread)] if self.usage else []
+                if not self.usage:
+                    self.usage.append(usage(thread))
+            if k < self.N:
+                self.stamps[k, 0] = perf()
+            out = read()
+            if k < self.N:
+                self.stamps[k, 1] = perf()
+            self.k = k + 1
+            return out
+
+        def timed_command(q: Any, **kw: Any) -> Any:
+            k = self.k - 1
+            if 0 <= k < self.N:
+                self.stamps[k, 2] = perf()
+            try:
+                return command(q, **kw)
+            finally:
+                if 0 <= k < self.N:
+                    self.stamps[k, 3] = perf()
+
         loop.controller.tick = timed
+        robot.read, robot.command = timed_read, timed_command
         self.faults = resource.getrusage(resource.RUSAGE_SELF)  # from here on: the run (warm-up done)
 
     def report(self) -> dict[str, Any]:
         now = resource.getrusage(resource.RUSAGE_SELF)
+        u = self.usage
+        in_cycles = {} if len(u) < 2 else {
+            "faults_in_cycles": (u[1].ru_minflt - u[0].ru_minflt, u[1].ru_majflt - u[0].ru_majflt),
+            "involuntary_switches_in_cycles": u[1].ru_nivcsw - u[0].ru_nivcsw,
+        }
         return {"tick_us": (self.times[: self.n] * 1e6).tolist(), "major_faults": now.ru_majflt - self.faults.ru_majflt,
-                "minor_faults": now.ru_minflt - self.faults.ru_minflt}
+                "minor_faults": now.ru_minflt - self.faults.ru_minflt, "cycle_stamps": self.stamps[: self.k].copy(),
+                **in_cycles}
+
+
+def phases(
+    comp: np.ndarray, tick: np.ndarray, hook: np.ndarray, stamps: np.ndarray, budget: float, late: float
+) -> dict[str, Any]:
+    """Each cycle's busy time as the loop counts it, from the stamps: its compute, then the filter before the
+    previous command and the tail after it (the hooks, the log, the run's bookkeeping) until this read. The
+    cycles over ``budget``, each put down to the part furthest above its own median, and those whose state
+    came ``late`` after the read was called (franky-sim stalled; the loop catches up on the F/T socket in its
+    compute). All in µs."""
+    n = min(comp.size, len(stamps) - 1, hook.size - 1)  # the last cycle's command is the disconnect's
+    if n < 3:
+        return {}
+    sp, c = stamps[:n] * 1e6, comp[:n]
+    read_wait, command = sp[:, 1] - sp[:, 0], sp[:, 3] - sp[:, 2]
+    filt = sp[:-1, 2] - sp[:-1, 1] - c[:-1]  # read return to command call, less the compute: the filter
+    tail = sp[1:, 0] - sp[:-1, 3]  # command return to the next read call
+    hooks = hook[1:n]  # hook[0] ran before the first cycle
+    busy = c[1:] + filt + tail
+    t = tick[1:n] if tick.size >= n else np.zeros(n - 1)
+    parts = {"tick": t, "compute_other": c[1:] - t, "filter": filt, "hooks": hooks, "tail_other": tail - hooks}
+    excess = np.stack([v - np.median(v) for v in parts.values()])
+    miss = busy > budget
+    led = np.asarray(list(parts))[np.argmax(excess, axis=0)][miss]
+    return {
+        "read_wait_p50_us": round(float(np.median(read_wait)), 1),
+        "command_p50_us": round(float(np.median(command)), 1),
+        "command_p99_us": round(float(np.percentile(command, 99)), 1),
+        "tail_p50_us": round(float(np.median(tail)), 1),
+        "tail_p99_us": round(float(np.percentile(tail, 99)), 1),
+        "busy_full_p99_us": round(float(np.percentile(busy, 99)), 1),
+        "busy_full_misses": int(miss.sum()),
+        "misses_led_by": {k: int((led == k).sum()) for k in parts},
+        "misses_after_a_late_state": int((miss & (read_wait[1:] > late)).sum()),
+    }
 
 
 def longest_run(mask: np.ndarray) -> int:
@@ -133,6 +219,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
     from lapwrench.hardware.cli import SimulatedHexProcess
     from lapwrench.hardware.frankysim import FrankySimServer
     from lapwrench.hardware.rt import FtSpec, RtOptions, RtProcess, RtSpec, franka_factory
+    from lapwrench.hardware.rt.child import FT_CATCH_UP_S
     from lapwrench.safety.supervisor import SupervisorConfig
     from lapwrench.virtual import DEFAULT_Q0
 
@@ -154,6 +241,14 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
         closers.append(server.stop)
         fake = SimulatedHexProcess(hand_force, rate_hz=1000.0, fifo_priority=a.ft_box_priority or None).start()
         closers.append(fake.close)
+        if a.frankysim_nice:  # every thread of it: its steps at a higher share of a busy machine's CPUs
+            for tid in os.listdir(f"/proc/{server.pid}/task"):
+                with contextlib.suppress(ProcessLookupError):
+                    os.setpriority(os.PRIO_PROCESS, int(tid), a.frankysim_nice)
+        others = _cpus(a.others_cpus)
+        if others is not None:  # franky-sim, the F/T box and this process (its threads, and what it spawns next)
+            for pid in (server.pid, fake.proc.pid, os.getpid()):
+                _pin(pid, others)
         spec = RtSpec(
             cfg=cfg,
             robot_factory=functools.partial(
@@ -164,7 +259,8 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
             tactile=True,
             instruments=loaded,
             log_cycles=live,
-            rt=RtOptions(fifo_priority=a.rt_priority or None, cpus=_cpus(a.rt_cpus), warn=False),
+            rt=RtOptions(fifo_priority=a.rt_priority or None, cpus=_cpus(a.rt_cpus), lock_memory=a.lock_memory,
+                         warn=False),
             loop_hook=TickTimer,
         )
         # franky-sim stands for the robot but shares our CPUs: on a busy machine it can stall for
@@ -183,7 +279,7 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
                 if a.detector.startswith("onnx")
                 else functools.partial(spec_factory, "classical", (640, 480))
             )
-            det = DetectorProcess(factory, rp.bus_name, (640, 480), cpus=_cpus(a.detector_cpus)).start()
+            det = DetectorProcess(factory, rp.bus_name, (640, 480), cpus=_cpus(a.detector_cpus) or others).start()
             closers.append(det.stop)
             rp.detector_pid = det.pid
             images = [draw_instrument_scene((640, 480), seed=i)[0] for i in range(8)]
@@ -277,11 +373,25 @@ def one_run(name: str, a: argparse.Namespace, loaded: bool, live: bool = False) 
         "live_kbytes_per_s": round(client.bytes / wall / 1e3, 1) if client is not None else None,
         "page_faults_major": rep.get("major_faults"),  # the loop's process, from its first cycle to its end
         "page_faults_minor": rep.get("minor_faults"),
+        # the loop's thread from its first cycle to its last thousandth: faults inside the cycling (a locked
+        # process counts the pages it maps as faults when it maps them), and preemptions
+        "loop_page_faults_minor_in_cycles": rep.get("faults_in_cycles", (None, None))[0],
+        "loop_page_faults_major_in_cycles": rep.get("faults_in_cycles", (None, None))[1],
+        "loop_involuntary_switches_in_cycles": rep.get("involuntary_switches_in_cycles"),
+        **phases(comp, tick, hook, np.asarray(rep.get("cycle_stamps", np.zeros((0, 4)))), a.budget_us,
+                 FT_CATCH_UP_S * 1e6),
         "rt_problems": ready.get("rt_problems"),
         "alarm": st.alarm,
         "stopped_at_rest": st.stopped_at_rest,
     }
     return out
+
+
+def _pin(pid: int | None, cpus: tuple[int, ...]) -> None:
+    """Every thread of process ``pid`` onto ``cpus``."""
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(ProcessLookupError):  # a thread that ended meanwhile
+            os.sched_setaffinity(int(tid), cpus)
 
 
 def _cpus(text: str | None) -> tuple[int, ...] | None:
@@ -306,6 +416,13 @@ def main() -> int:
     ap.add_argument("--rt-priority", type=int, default=80, help="SCHED_FIFO priority of the loop (0: off)")
     ap.add_argument("--rt-cpus", default=None, help="pin the loop's process to these CPUs")
     ap.add_argument("--detector-cpus", default=None, help="pin the detector process to these CPUs")
+    ap.add_argument("--others-cpus", default=None,
+                    help="pin franky-sim, the F/T box, this process and (unless --detector-cpus) the detector to these"
+                    " CPUs (with --rt-cpus: the loop's CPU left to the loop)")
+    ap.add_argument("--frankysim-nice", type=int, default=0,
+                    help="nice value of franky-sim's threads (e.g. -10: a real Franka has a computer of its own)")
+    ap.add_argument("--lock-memory", action=argparse.BooleanOptionalAction, default=True,
+                    help="lock the loop's memory (mlockall, RtOptions.lock_memory)")
     a = ap.parse_args()
 
     from lapwrench.hardware.frankysim import frankysim_available
@@ -327,7 +444,12 @@ def main() -> int:
             f" longest run {r['longest_miss_run_cycles']};"
             f" F/T fresh {r['ft_fresh_pct']} %; detector {r['detector_fps_hz']} fps;"
             f" franky-sim step p50 {r['frankysim_step_p50_us']} us, x{r['frankysim_realtime_factor_x']};"
-            f" page faults in the loop's process {r['page_faults_major']} major / {r['page_faults_minor']} minor;"
+            f" page faults in the loop's process {r['page_faults_major']} major / {r['page_faults_minor']} minor"
+            f" ({r['loop_page_faults_minor_in_cycles']} minor inside the cycling),"
+            f" involuntary switches {r['loop_involuntary_switches_in_cycles']};"
+            f" read wait p50 {r.get('read_wait_p50_us')} us, command p50 {r.get('command_p50_us')} us, tail after it"
+            f" p50 {r.get('tail_p50_us')} / p99 {r.get('tail_p99_us')} us; misses led by {r.get('misses_led_by')},"
+            f" {r.get('misses_after_a_late_state')} after a late state;"
             f" rt: {r['rt_problems'] or 'SCHED_FIFO ' + str(a.rt_priority) if a.rt_priority else 'normal priority'}"
         )
     res: dict[str, Any] = {"deadline_budget_us": a.budget_us, "detector": a.detector, "rt_priority": a.rt_priority}

@@ -132,7 +132,7 @@ def rt_spec(cfg: Config, **kw: Any) -> Any:
 
     kw.setdefault("robot_factory", functools.partial(sim_factory, realtime=True))
     kw.setdefault("supervisor", relaxed_supervisor_config())
-    kw.setdefault("rt", RtOptions(fifo_priority=None, warn=False))
+    kw.setdefault("rt", RtOptions(fifo_priority=None, lock_memory=False, warn=False))
     # heartbeat timeouts far above any stall of a loaded CI machine (a test that injects a hang
     # sets its own): the tests assert what happens, never how fast
     kw.setdefault("feeder_timeout", 5.0)

@@ -11,6 +11,7 @@ from lapwrench.drivers.ft import (
     RECORD_SIZE,
     pack_record,
     pack_request,
+    record_fields,
     unpack_record,
     unpack_request,
 )
@@ -35,6 +36,15 @@ def test_request_and_record_codec_roundtrip() -> None:
 def test_unpack_record_rejects_malformed(data: bytes) -> None:
     with pytest.raises(PacketError):
         unpack_record(data)
+    with pytest.raises(PacketError):  # the same refusal from the fields' decoder the 1 kHz drain uses
+        record_fields(data)
+
+
+def test_record_fields_are_the_nine_numbers_on_the_wire_in_order() -> None:
+    rec = pack_record(2**32 - 1, 5, 0x10, [1, -2, 3, -4, 5, -2**31])
+    assert record_fields(rec) == (2**32 - 1, 5, 0x10, 1, -2, 3, -4, 5, -2**31)
+    r = unpack_record(rec)
+    assert (r.sequence, r.ft_sequence, r.status, *r.counts) == record_fields(rec)
 
 
 def test_unpack_request_rejects_wrong_header() -> None:

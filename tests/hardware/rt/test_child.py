@@ -129,6 +129,28 @@ def test_sigint_is_ignored_and_sigterm_stops_the_loop_to_rest(panda_cfg: Config)
     assert report["probe_robot"] == "simulated panda (MuJoCo)" and report["probe_pid"] == rp.pid
 
 
+@pytest.mark.slow  # the child builds the controller first
+def test_a_child_asked_to_lock_its_memory_has_it_locked_when_it_reports_ready_or_says_why_not(
+    panda_cfg: Config,
+) -> None:
+    from lapwrench.hardware.rt import RtOptions
+
+    rp = rt_process(rt_spec(panda_cfg, tactile=False, rt=RtOptions(fifo_priority=None, lock_memory=True, warn=False)))
+    try:
+        ready = rp.start()
+        with open(f"/proc/{rp.pid}/status") as f:
+            locked_kb = next(int(line.split()[1]) for line in f if line.startswith("VmLck:"))
+        rp.drain()
+        events = [m for _, k, m in rp.events if k == "rt_setup"]
+    finally:
+        rp.close()
+    if ready["rt_problems"]:  # not permitted here (a finite RLIMIT_MEMLOCK, no CAP_IPC_LOCK): one line, logged
+        (problem,) = ready["rt_problems"]
+        assert problem.startswith("memory not locked") and locked_kb == 0 and events == [problem]
+    else:  # the interpreter, numpy, the controller's compiled kernels, the robot: all of it
+        assert locked_kb > 100 << 10 and events == []
+
+
 def _no_push(t: float) -> Any:
     import numpy as np
 

@@ -7,7 +7,17 @@ import math
 import numpy as np
 
 from lapwrench.hardware.rt import MAX_POINTS, ShmInput
-from lapwrench.hardware.shm import Bus
+from lapwrench.hardware.shm import Bus, SeqlockSlot
+
+
+class CountingSlot(SeqlockSlot):
+    """A slot that counts the copies of its payload."""
+
+    copies = 0
+
+    def read_into(self, out: np.ndarray, retries: int = 4) -> tuple[int, float, int] | None:
+        type(self).copies += 1
+        return super().read_into(out, retries)
 
 
 def test_shared_inputs_flag_corrupt_slots(bus: Bus) -> None:
@@ -61,3 +71,25 @@ def test_the_input_slots_come_after_the_fixed_regions() -> None:
         assert Bus.attach(b.shm.name, short)["ctl"].shape == (16,)
     finally:
         b.close()
+
+
+def test_an_unchanged_slot_is_not_copied_again_and_a_torn_one_is_still_counted(bus: Bus) -> None:
+    """The child refreshes every input after every command, and a writer publishes at 25 to 200 Hz: a refresh
+    that finds the sequence number it has read copies nothing. A write in progress (odd number) is read,
+    retried and counted torn as before."""
+    plain = bus.slot("tactile")
+    slot = CountingSlot(plain.hdr, plain.stamp, plain.data)
+    tac = ShmInput(slot, "tactile", clock=lambda: 10.0)
+    assert tac.refresh(10.0) is None and CountingSlot.copies == 0  # nothing published yet: nothing to copy
+    plain.write(np.full(64, 40.0), 9.95)
+    assert tac.refresh(10.0) is None and CountingSlot.copies == 1
+    for _ in range(5):
+        assert tac.refresh(10.0) is None
+    assert CountingSlot.copies == 1  # unchanged: not copied again
+    s = tac.get_fresh(0.1, 10.0)
+    assert s is not None and s.value.values[0] == 40.0
+    plain.write(np.full(64, 41.0), 9.99)
+    assert tac.refresh(10.0) is None and CountingSlot.copies == 2 and tac.get().value.values[0] == 41.0  # type: ignore[union-attr]
+    plain.hdr[0] += 1  # a writer stopped in the middle of a write
+    assert tac.refresh(10.0) is None and tac.refresh(10.0) is None
+    assert tac.torn == 2 and tac.get().value.values[0] == 41.0  # type: ignore[union-attr]

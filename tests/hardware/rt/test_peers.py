@@ -93,3 +93,17 @@ def test_a_peer_gone_before_the_watch_starts_is_named_at_the_first_check(sleeper
     watch = PeerWatch(np.zeros(8), [peer])
     assert watch.check(time.monotonic()) == (f"parent process (pid {sleeper.pid}) exited", peer)
     watch.close()
+
+
+def test_a_heartbeat_stamp_that_is_not_a_number_counts_as_no_heartbeat() -> None:
+    """A corrupt stamp (NaN) ages like a peer that never beat: hung after its timeout (before, the NaN made
+    every age comparison false, and the peer was never found hung)."""
+    beats = np.zeros(8)
+    watch = PeerWatch(beats, [PeerSpec("feeder", beat=0, timeout=0.05)])
+    now = time.monotonic()
+    watch.arm(now)
+    beats[0] = np.nan
+    assert watch.check(now + 0.04) is None
+    hit = watch.check(now + 0.2)
+    assert hit is not None and hit[0] == "no heartbeat from the feeder for inf ms (> 50 ms): hung"
+    watch.close()

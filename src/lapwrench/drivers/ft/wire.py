@@ -68,6 +68,7 @@ __all__ = [
     "named_wrench",
     "pack_record",
     "pack_request",
+    "record_fields",
     "unpack_record",
     "unpack_request",
     "wire_counts",
@@ -163,8 +164,10 @@ def pack_record(sequence: int, ft_sequence: int, status: int, counts: ArrayLike)
     return _RECORD.pack(sequence & 0xFFFFFFFF, ft_sequence & 0xFFFFFFFF, status & 0xFFFFFFFF, *c)
 
 
-def unpack_record(data: bytes) -> FTRecord:
-    """Decode one 36-byte record.
+def record_fields(data: bytes) -> tuple[int, ...]:
+    """The nine fields of one 36-byte record as they are on the wire: ``(sequence, ft_sequence, status,
+    Fx, Fy, Fz, Tx, Ty, Tz)`` (raw counts). What the polled F/T drain decodes each cycle: no
+    :class:`FTRecord` built for a record that is checked and, unless it is the newest, dropped.
 
     Raises:
         PacketError: the datagram is not exactly 36 bytes, or it starts with the request header
@@ -175,5 +178,17 @@ def unpack_record(data: bytes) -> FTRecord:
         if n == REQUEST_SIZE and data[:2] == RDT_HEADER.to_bytes(2, "big"):
             raise PacketError("received a request packet (header 0x1234) where a record was expected")
         raise PacketError(f"record of {n} bytes, expected {RECORD_SIZE}")
-    seq, ft_seq, status, *counts = _RECORD.unpack(data)
-    return FTRecord(seq, ft_seq, status, tuple(counts))
+    return _RECORD_UNPACK(data)
+
+
+_RECORD_UNPACK = _RECORD.unpack
+
+
+def unpack_record(data: bytes) -> FTRecord:
+    """Decode one 36-byte record.
+
+    Raises:
+        PacketError: as :func:`record_fields`.
+    """
+    seq, ft_seq, status, c0, c1, c2, c3, c4, c5 = record_fields(data)
+    return FTRecord(seq, ft_seq, status, (c0, c1, c2, c3, c4, c5))

@@ -29,7 +29,7 @@ from lapwrench.hardware.rt.bus import (
 )
 from lapwrench.hardware.rt.codec import ShmLogSink
 from lapwrench.hardware.rt.inputs import ShmInput
-from lapwrench.hardware.rt.options import apply_realtime
+from lapwrench.hardware.rt.options import apply_realtime, lock_memory
 from lapwrench.hardware.rt.peers import PeerSpec, PeerWatch
 from lapwrench.hardware.rt.spec import FtSpec, RtSpec
 from lapwrench.hardware.shm import Bus
@@ -47,6 +47,12 @@ FT_DRAIN_BUDGET = 32
 box's address (junk costs about 5 µs a datagram to reject) holds a cycle for a bounded time; the rest
 stays queued, and what is published carries its arrival stamp, so a backlog reads as stale."""
 
+PEER_CHECK_EVERY = 4
+"""The peer watch runs after every this many commands (and before the first cycle): a helper that exited
+is noticed within this many cycles (its pidfd), a hang when its heartbeat is at most this many cycles older
+than its timeout (0.5 s, 1 s). A check is a system call (the pidfds' poll) and the heartbeats' ages: 3 µs
+p50 with the caches cold, every cycle for nothing."""
+
 FT_CATCH_UP_BUDGET = 256
 """Datagrams the catch-up drain after a late cycle reads at most: about what the socket's default buffer
 holds (the kernel drops what comes beyond), so the tick after a stall reads the newest record there is."""
@@ -56,9 +62,9 @@ class _CycleHooks:
     """The child's work around each cycle.
 
     :meth:`after_command` (the loop's ``after_command``): heartbeat, F/T drain, shared inputs, peer
-    watch, after the command is sent, in the slack before the next state; the next tick reads what they
-    gathered, under 1 ms older. Once before the first cycle too. Each call is timed (:attr:`hook_us`):
-    part of the cycle's work, though not of the command's latency.
+    watch (every :data:`PEER_CHECK_EVERY` th call), after the command is sent, in the slack before the next
+    state; the next tick reads what they gathered, under 1 ms older. Once before the first cycle too. Each
+    call is timed (:attr:`hook_us`): part of the cycle's work, though not of the command's latency.
 
     :meth:`before_tick` (the loop's ``pre_cycle``): the cycle counted; after a late cycle, the F/T drain
     again (:data:`FT_CATCH_UP_S`); then the F/T sample the tick will read is counted fresh or not.
@@ -68,6 +74,10 @@ class _CycleHooks:
         self, bus: Bus, ft: Any, ft_max_age: float, inputs: dict[str, ShmInput], watch: PeerWatch, dt: float = 0.001,
     ) -> None:
         self.ctl, self.beat = bus["ctl"], bus["beat"]
+        # written every cycle: through memoryviews, which store a Python number without numpy's item machinery
+        # (numpy's stubs give arrays the buffer protocol only from Python 3.12 on)
+        self._ctl: memoryview[int] = memoryview(self.ctl)  # type: ignore[arg-type]
+        self._beat: memoryview[float] = memoryview(self.beat)  # type: ignore[arg-type]
         self.ft, self.ft_max_age = ft, ft_max_age
         self.inputs = inputs
         self.watch = watch
@@ -78,6 +88,7 @@ class _CycleHooks:
         self.ft_catch_ups = 0
         self.fault: str | None = None
         self.hook_us = Growable()  # the time each after_command took (µs)
+        self._commands = 0  # after_command calls: the peer watch runs on every PEER_CHECK_EVERY-th
         self._drained_at = -math.inf
         self._catch_up_s = max(FT_CATCH_UP_S, 5.0 * dt)
 
@@ -88,7 +99,7 @@ class _CycleHooks:
 
     def before_tick(self, now: float) -> None:
         self.cycles += 1
-        self.ctl[CTL_CYCLES] = self.cycles
+        self._ctl[CTL_CYCLES] = self.cycles
         ft = self.ft
         if ft is None:
             return
@@ -111,7 +122,7 @@ class _CycleHooks:
         self._drained_at = time.monotonic()
 
     def _after_command(self, now: float) -> None:
-        self.beat[BEAT_CHILD] = now
+        self._beat[BEAT_CHILD] = now
         ft = self.ft
         if ft is not None:
             self._drain(ft, FT_DRAIN_BUDGET)
@@ -120,6 +131,10 @@ class _CycleHooks:
             if problem is not None:
                 inp.kill()
                 self._alarm(now, "ipc_corrupt", f"{problem}; its input is off")
+        k = self._commands
+        self._commands = k + 1
+        if k % PEER_CHECK_EVERY:
+            return
         hit = self.watch.check(now)
         if hit is not None:
             message, peer = hit
@@ -148,10 +163,11 @@ class _StopFlag:
 
     def __init__(self, ctl: np.ndarray) -> None:
         self.ctl = ctl
+        self._ctl: memoryview[int] = memoryview(ctl)  # type: ignore[arg-type]  # asked every cycle: no numpy item access
         self.signal: str | None = None
 
     def is_set(self) -> bool:
-        return self.signal is not None or bool(self.ctl[CTL_STOP])
+        return self.signal is not None or self._ctl[CTL_STOP] != 0
 
 
 def _open_ft(spec: FtSpec) -> Any:
@@ -252,6 +268,13 @@ def _child_main(spec: RtSpec, bus_name: str, conn: Any, peers: list[PeerSpec]) -
         )
         hooks.loop = loop
         extra = spec.loop_hook(loop) if spec.loop_hook is not None else None
+        if spec.rt.lock_memory:  # everything built: what the loop has is locked in, and what it maps later
+            problem = lock_memory()
+            if problem is not None:
+                problems.append(problem)
+                sink.event(0.0, "rt_setup", problem)
+                if spec.rt.warn:
+                    warnings.warn(f"lapwrench real-time process: {problem}", RuntimeWarning, stacklevel=1)
         ctl[CTL_PHASE] = PHASE_READY
         conn.send(("ready", {"robot": getattr(robot, "device", type(robot).__name__), "devices": devices,
                              "rt_problems": problems, "pid": os.getpid()}))

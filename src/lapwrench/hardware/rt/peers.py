@@ -28,6 +28,9 @@ class PeerWatch:
 
     def __init__(self, beats: np.ndarray, peers: list[PeerSpec]) -> None:
         self.beats = beats
+        # the stamps read as Python floats, without numpy's item access (numpy's stubs give arrays the buffer
+        # protocol only from Python 3.12 on)
+        self._beat: memoryview[float] = memoryview(beats)  # type: ignore[arg-type]
         self.peers = peers
         self._poll = select.poll()
         self._fd_peer: dict[int, PeerSpec] = {}
@@ -56,10 +59,11 @@ class PeerWatch:
         for p in self._kill_check:
             if not _pid_alive(p.pid):  # type: ignore[arg-type]
                 return f"{p.name} process (pid {p.pid}) exited", p
+        beat, armed = self._beat, self.armed_at
         for p in self.peers:
-            last = max(float(self.beats[p.beat]), self.armed_at)
-            if now - last > p.timeout:
-                age = now - float(self.beats[p.beat]) if self.beats[p.beat] > 0 else math.inf
+            stamp = beat[p.beat]
+            if now - (stamp if stamp > armed else armed) > p.timeout:
+                age = now - stamp if stamp > 0 else math.inf
                 return f"no heartbeat from the {p.name} for {age * 1e3:.0f} ms (> {p.timeout * 1e3:.0f} ms): hung", p
         return None
 
