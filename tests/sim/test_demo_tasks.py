@@ -100,3 +100,17 @@ def test_a_stop_signal_while_the_workers_start_stops_the_demo_once_they_have_sta
         time.sleep(0.1)
     assert not any(_running(pid) for pid in workers)
     assert "Traceback" not in capfd.readouterr().err
+
+
+def test_a_scenario_task_draws_its_figures_where_it_ran(tmp_path: Path) -> None:
+    """The tasks draw their scenario's report figures themselves (in the worker that simulated it, beside
+    the other workers' runs, not all in a row once every run is done): run_tasks returns each result
+    with its figures already in the folder."""
+    plan = plan_demo(tmp_path, ["keep-out", "rcm-disturbance"], time_scale=0.05, video=False, detector="projected",
+                     workers=1)
+    done = run_tasks(plan, list(plan.scenarios), tqdm(total=1.0, disable=True))
+    for name in plan.scenarios:
+        res = done[name]
+        assert not isinstance(res, str)
+        assert res.figures and all((tmp_path / f).is_file() for f in res.figures), (name, res.figures)
+    assert "keep_out.png" in done["keep-out"].figures  # type: ignore[union-attr]

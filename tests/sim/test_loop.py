@@ -3,6 +3,8 @@ its records of a run."""
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -127,6 +129,27 @@ def test_a_record_holds_the_worlds_readings_of_that_tick() -> None:
         assert np.array_equal(trace["hand_force"][-1], [0.0, 2.0 * k, 0.0])
     assert list(trace["tick"]) == list(range(20)) and len(trace["t"]) == 20
     assert "cue:interaction" in trace and trace["cue:interaction"].shape == (20, 6)
+
+
+def test_a_pickled_trace_holds_an_array_per_column_and_reads_the_same() -> None:
+    """A trace crosses a process boundary (a demo worker's result) as one array per column, not as its
+    rows' many small objects; unpickled it reads the same columns, each read a fresh array, and a
+    column whose rows do not stack stays a list. Rows added afterwards extend it."""
+    trace = Trace()
+    for k in range(5):
+        trace.add(t=k * 1e-3, mode="handle" if k % 2 else "idle", p=np.full(3, float(k)), ok=k > 2,
+                  ragged=np.zeros(k + 1))
+    copy = pickle.loads(pickle.dumps(trace))
+    for key in ("t", "mode", "p", "ok"):
+        assert isinstance(copy.columns[key], np.ndarray), key
+        assert copy[key].dtype == trace[key].dtype and np.array_equal(copy[key], trace[key]), key
+    assert isinstance(copy.columns["ragged"], list)
+    assert [r.size for r in copy.columns["ragged"]] == [1, 2, 3, 4, 5]
+    copy["p"][0] = -1.0  # a read is the caller's own array
+    assert copy["p"][0, 0] == 0.0
+    copy.add(t=5e-3, mode="idle", p=np.ones(3), ok=True, ragged=np.zeros(6))
+    assert np.array_equal(copy["t"], np.arange(6) * 1e-3) and copy["p"].shape == (6, 3)
+    assert list(copy["mode"]) == ["idle", "handle", "idle", "handle", "idle", "idle"]
 
 
 def test_loops_of_one_configuration_run_alike_and_apart() -> None:

@@ -50,3 +50,32 @@ def test_after_a_failed_tick_there_is_no_state_to_draw_and_nothing_is_sent(panda
     finally:
         r.close()
         w.close()
+
+
+def test_the_laparoscope_view_leaves_out_the_room_it_never_sees(panda_scene: Scene) -> None:
+    """The floor and the table lie outside the phantom's closed housing: the laparoscope's view does not
+    draw them (nor the arm), and its frames are those drawn with them, pixel for pixel, as the scope moves."""
+    import mujoco
+
+    from lapwrench.sim.offscreen import make_renderer, scope_view_option
+
+    w = make_renderable_world(panda_scene)
+    m = w.model
+    with_room = mujoco.MjvOption()  # a default view: draws the room and the arm too
+    r = make_renderer(m, 640, 480)
+    try:
+        r.update_scene(w.data, camera=CAMERA_NAME, scene_option=scope_view_option())
+        drawn = {m.geom(int(r.scene.geoms[i].objid)).name for i in range(r.scene.ngeom)
+                 if r.scene.geoms[i].objtype == mujoco.mjtObj.mjOBJ_GEOM}
+        assert "tissue" in drawn and not drawn & {"floor", "table"}
+        rest = w.incision_rest_position()
+        for k in range(4):
+            w.set_instrument_tip(0, rest + np.array([0.01 - 0.01 * k, 0.004 * k, -0.145]))
+            q = w.scene.q0 + k * np.array([0.01, -0.01, 0.0, 0.01, 0.0, 0.01, 0.3])
+            for _ in range(150):
+                w.step(q)
+            r.update_scene(w.data, camera=CAMERA_NAME, scene_option=with_room)
+            assert np.array_equal(w.render(), r.render()), k
+    finally:
+        r.close()
+        w.close()

@@ -25,7 +25,7 @@ from lapwrench import __version__
 from lapwrench import config as config_mod
 from lapwrench.jit import cache_is_warm
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
-from lapwrench.sim import cue_scenarios, plots, report
+from lapwrench.sim import report
 from lapwrench.sim.demo_tasks import (
     PRINTED_DAMPING,
     TRACKING_SCENARIOS,
@@ -204,7 +204,7 @@ def _run_demo(plan: DemoPlan, progress: bool, signals: StopSignals) -> dict[str,
         r = done[n]
         assert isinstance(r, ScenarioResult)  # a scenario's; the printed-damping check alone gives a text
         results[n] = r
-    figures = {n: _plots(n, r, out, plan.configs[n]) for n, r in results.items()}
+    figures = {n: r.figures for n, r in results.items()}  # drawn by the tasks (run_tasks)
     check = done.get(PRINTED_DAMPING)
     wall = time.perf_counter() - t0
     meta = {
@@ -242,22 +242,6 @@ def _write_failed(out: Path, exc: BaseException) -> None:
         text += "\n\n" + "".join(traceback.format_exception(cause))
     with contextlib.suppress(OSError):
         (out / "FAILED.txt").write_text(text + "\n")
-
-
-def _plots(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
-    stem = name.replace("-", "_")
-    cues = plots.plot_cues(res, out, stem)  # every cue the config ran, by name
-    own = {"grip": plots.plot_grip, "rcm-disturbance": plots.plot_disturbance, "hard-push": plots.plot_hard_push}
-    if name in own:
-        return own[name](res, out) + cues
-    if name in cue_scenarios.SCENARIOS:
-        return cue_scenarios.plot(name, res, out) + cues
-    figs = plots.plot_tracking_run(res, out, stem) + cues
-    if res.frames:
-        figs.append(plots.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
-    if (out / f"{name}.mp4").exists():
-        figs.append(f"{name}.mp4")
-    return figs
 
 
 def _instrument_sources(results: dict[str, ScenarioResult]) -> str:

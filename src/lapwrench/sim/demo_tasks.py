@@ -1,6 +1,6 @@
-"""The demo's tasks and the worker processes that run them (:func:`run_tasks`): each scenario, and the
-printed-damping check, in a process of its own (or all in this one with one worker), the costliest
-first, with the progress of every worker fed into one bar.
+"""The demo's tasks and the worker processes that run them (:func:`run_tasks`): each scenario with its
+report figures (:func:`scenario_figures`), and the printed-damping check, in a process of its own (or all
+in this one with one worker), the costliest first, with the progress of every worker fed into one bar.
 """
 
 from __future__ import annotations
@@ -180,12 +180,35 @@ def _task(name: str, plan: DemoPlan) -> tuple[str, ScenarioResult | str, str | N
     try:
         if name == PRINTED_DAMPING:
             return name, _printed_damping_check(opts, plan.robot), None
-        return name, SCENARIOS[name](plan.configs[name], opts), None
+        res = SCENARIOS[name](plan.configs[name], opts)
     except (SimulationUnstableError, SafetyStopError) as exc:
         return name, "", f"simulation of '{name}' stopped: {exc}. No report was written."
     finally:
         if gc_was_enabled:
             gc.enable()
+    # its figures now, in this worker: beside the other workers' simulations, not all in a row at the end
+    res.figures = scenario_figures(name, res, plan.out, plan.configs[name])
+    return name, res, None
+
+
+def scenario_figures(name: str, res: ScenarioResult, out: Path, cfg: config_mod.Config) -> list[str]:
+    """Draw the report's figures of scenario ``name`` into ``out``; their file names (with the video's,
+    if the scenario wrote one)."""
+    from lapwrench.sim import cue_scenarios, plots  # matplotlib: imported where the figures are drawn
+
+    stem = name.replace("-", "_")
+    cues = plots.plot_cues(res, out, stem)  # every cue the config ran, by name
+    own = {"grip": plots.plot_grip, "rcm-disturbance": plots.plot_disturbance, "hard-push": plots.plot_hard_push}
+    if name in own:
+        return own[name](res, out) + cues
+    if name in cue_scenarios.SCENARIOS:
+        return cue_scenarios.plot(name, res, out) + cues
+    figs = plots.plot_tracking_run(res, out, stem) + cues
+    if res.frames:
+        figs.append(plots.snapshot_strip(res.frames, cfg, out / f"{stem}_snapshots.png"))
+    if (out / f"{name}.mp4").exists():
+        figs.append(f"{name}.mp4")
+    return figs
 
 
 def run_tasks(plan: DemoPlan, names: list[str], bar: Any) -> dict[str, ScenarioResult | str]:

@@ -62,11 +62,23 @@ def built_scene(config: SceneConfig) -> Scene:
 _ZERO_WRENCH = np.zeros(6)  # a paper cue the configuration switched off
 
 
+def _as_column(values: list | np.ndarray) -> list | np.ndarray:
+    """A trace column as one array (what :meth:`Trace.__getitem__` gives), or the list itself when its
+    rows do not stack into one (ragged rows)."""
+    try:
+        return np.asarray(values)
+    except ValueError:
+        return values
+
+
 @dataclass
 class Trace:
-    """Per-tick records of one run (lists while running, arrays after :meth:`finish`)."""
+    """Per-tick records of one run: a list per column while running; :meth:`__getitem__` gives a column
+    as a fresh array. Pickled (a demo worker's results, a study's runs) as one array per column: a
+    list of a run's tens of thousands of small per-tick objects takes seconds to pickle and unpickle,
+    its array milliseconds (the unpickled trace reads the same; :meth:`add` goes on with a list)."""
 
-    columns: dict[str, list] = field(default_factory=dict)
+    columns: dict[str, list | np.ndarray] = field(default_factory=dict)
 
     def add(self, **values: object) -> None:
         cols = self.columns
@@ -74,10 +86,19 @@ class Trace:
             col = cols.get(k)
             if col is None:
                 col = cols[k] = []
+            elif type(col) is not list:  # an array column (an unpickled trace): rows are appended to a list
+                col = cols[k] = list(col)
             col.append(v)
 
     def __getitem__(self, key: str) -> np.ndarray:
-        return np.asarray(self.columns[key])
+        col = self.columns[key]
+        return col.copy() if isinstance(col, np.ndarray) else np.asarray(col)
+
+    def __getstate__(self) -> dict[str, object]:
+        return {"columns": {k: _as_column(v) for k, v in self.columns.items()}}
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
 
     def __contains__(self, key: str) -> bool:
         return key in self.columns
@@ -201,6 +222,7 @@ class ClosedLoop:
         self.q0 = self._reading.q
         self.events: list[object] = []
         self.compute_us: list[float] = []
+        self._cue_keys: dict[str, str] = {}
 
     def _sources(self) -> list[Source]:
         """The controller's inputs, each a simulated source sampled every control period (their own
@@ -347,7 +369,8 @@ class ClosedLoop:
         p_E, d_z = w.shaft_axis()
         incision = w.incision_position()
         wrenches = res.wrenches
-        cues: dict[str, object] = {f"cue:{name}": v for name, v in wrenches.items()}
+        keys = self._cue_keys  # "cue:<name>" made once per name, not every tick
+        cues: dict[str, object] = {keys.get(n) or keys.setdefault(n, f"cue:{n}"): v for n, v in wrenches.items()}
         for cue in self.controller.python_cues:
             values = (res.telemetry or {}).get(cue.name, ())
             for field_name, x in zip(cue.telemetry_fields, values, strict=False):

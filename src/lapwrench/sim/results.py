@@ -47,6 +47,7 @@ class ScenarioResult:
     runs: list[Run]
     metrics: dict[str, object]
     frames: list[tuple[np.ndarray, str]] = field(default_factory=list)  # (frame, label) snapshots
+    figures: list[str] = field(default_factory=list)  # its report's figure files (the demo draws them)
     instrument_source: str = ""
 
 

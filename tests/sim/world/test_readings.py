@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from lapwrench.rcm.geometry import initial_rcm_point, insertion_depth, rcm_error
-from lapwrench.robot.model import RobotModel
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth, initial_rcm_point, insertion_depth, rcm_error
+from lapwrench.robot.model import RobotModel, scope_axis
 from lapwrench.sim.scene.build import incision_position_for
 from lapwrench.sim.world import SimWorld
 
@@ -104,3 +104,8 @@ def test_ground_truth_is_the_controllers_geometry_at_the_simulated_pose(world: S
         assert e == pytest.approx(np.linalg.norm(rcm_error(kin, p)), abs=1e-9)
         assert depth == pytest.approx(insertion_depth(kin, p, cfg.scope.length), abs=1e-9)
     assert world.rcm_error() == world.axis_offset(world.incision_position())[0]
+    # one compiled call, the same numbers as eq (27)'s kernels called one after the other on MuJoCo's lap_E pose
+    p_E, R_E = world.frame_pose("lap_E")
+    d_z, P = scope_axis(np.ascontiguousarray(R_E))
+    for p in (world.incision_rest_position(), [0.4, -0.1, 0.3]):
+        assert world.axis_offset(p) == axis_rcm_error_and_depth(p_E, d_z, P, np.asarray(p, float), cfg.scope.length)

@@ -12,6 +12,9 @@ from lapwrench.robot.description import FRAME_H
 FT_FORCE_SENSOR = "handle_ft_force"
 FT_TORQUE_SENSOR = "handle_ft_torque"
 CAMERA_NAME = "lap_camera"
+# The geom group of what the laparoscope never sees: the arm with the scope's outside, and the room around
+# the phantom's closed housing (floor, table). Its view (lapwrench.sim.offscreen.scope_view_option) skips it.
+UNSEEN_BY_SCOPE_GROUP = 1
 OVERVIEW_CAMERA_NAME = "overview"
 TROCAR_BODY = "trocar"
 SLEEVE_BODY = "trocar_sleeve"

@@ -22,6 +22,7 @@ from lapwrench.sim.scene.names import (
     NEEDLE_BODY,
     ORGAN_BODY,
     PORT_SITES,
+    UNSEEN_BY_SCOPE_GROUP,
 )
 
 
@@ -57,7 +58,8 @@ def add_phantom(spec: mujoco.MjSpec, ph: PhantomConfig, incision: np.ndarray) ->
     world = spec.worldbody
     sx, sy, depth, wt = ph.size_x, ph.size_y, ph.depth, ph.wall_thickness
 
-    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2, 2, 0.05], material="floor", **vis)
+    room = {**vis, "group": UNSEEN_BY_SCOPE_GROUP}  # outside the closed housing: never in the laparoscope's view
+    world.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[2, 2, 0.05], material="floor", **room)
     # Table under the phantom.
     table_top = incision[2] - depth - 0.01
     world.add_geom(
@@ -66,7 +68,7 @@ def add_phantom(spec: mujoco.MjSpec, ph: PhantomConfig, incision: np.ndarray) ->
         size=[0.3, 0.3, table_top / 2],
         pos=[incision[0], incision[1], table_top / 2],
         rgba=[0.6, 0.6, 0.62, 1],
-        **vis,
+        **room,
     )
 
     housing = world.add_body(name=HOUSING_BODY, pos=list(incision))

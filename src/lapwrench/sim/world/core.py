@@ -14,10 +14,8 @@ import mujoco
 import numpy as np
 
 from lapwrench.jit import bind
-from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.description import FRAME_C, FRAME_E, FRAME_H
 from lapwrench.robot.limits import joint_torque_limits
-from lapwrench.robot.model import scope_axis
 from lapwrench.sim.offscreen import scope_view_option
 from lapwrench.sim.scene.build import Scene, build_scene
 from lapwrench.sim.scene.config import SceneConfig
@@ -51,6 +49,7 @@ from lapwrench.sim.world.kernels import (
 )
 from lapwrench.sim.world.loads import WorldLoads
 from lapwrench.sim.world.model_facts import _slice_if_contiguous, contacts_impossible, mocap_is_inert
+from lapwrench.sim.world.readings import axis_offset_of_body
 from lapwrench.sim.world.rendering import WorldRendering
 from lapwrench.sim.world.stepping import WorldStepping
 
@@ -187,8 +186,8 @@ class SimWorld(WorldStepping, WorldLoads, WorldRendering):
         # The readings' kernels, bound as well: the scenarios' records read them every tick.
         z3 = np.zeros(3)
         self._weld_force = bind(_weld_force, d.efc_type, d.efc_id, d.efc_force, self._weld, z3)
-        self._scope_axis = bind(scope_axis, self._xmat[self._body_E].reshape(3, 3))
-        self._axis_error_and_depth = bind(axis_rcm_error_and_depth, z3, z3, np.zeros((3, 3)), z3, 0.0)
+        self._scope_length = float(scene.config.scope.length)
+        self._axis_offset = bind(axis_offset_of_body, self._xpos, self._xmat, self._body_E, z3, self._scope_length)
         self.reset()
         self._warm_up()
 

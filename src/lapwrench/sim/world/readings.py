@@ -12,8 +12,21 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from lapwrench.jit import kernel
+from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.description import FRAME_C
+from lapwrench.robot.model import scope_axis
 from lapwrench.sim.scene.build import Scene
+
+
+@kernel
+def axis_offset_of_body(xpos: np.ndarray, xmat: np.ndarray, body: int, point: np.ndarray,
+                        length: float) -> tuple[float, float]:
+    """The controller's eq (27) |e_R| and tip depth (:func:`~lapwrench.rcm.geometry.axis_rcm_error_and_depth`)
+    for the scope axis of MuJoCo's pose of ``body`` (``xpos``, ``xmat``: ``MjData``'s rows) and ``point``:
+    the two kernels in one call from Python."""
+    d_z, P = scope_axis(xmat[body].reshape((3, 3)))
+    return axis_rcm_error_and_depth(xpos[body], d_z, P, point, length)
 
 
 class WorldReadings:
@@ -43,10 +56,10 @@ class WorldReadings:
     _xmat: np.ndarray
     _q_ref_prev: np.ndarray
     _tau_J_mean: np.ndarray
-    # kernels bound at construction (:mod:`.core`): _weld_force, scope_axis, axis_rcm_error_and_depth
+    _scope_length: float
+    # kernels bound at construction (:mod:`.core`): _weld_force, axis_offset_of_body
     _weld_force: Callable[..., None]
-    _scope_axis: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-    _axis_error_and_depth: Callable[..., tuple[float, float]]
+    _axis_offset: Callable[..., tuple[float, float]]
 
     def _body_id(self, name: str) -> int:
         """Body id by name, looked up once."""
@@ -154,12 +167,10 @@ class WorldReadings:
         the one copy of those formulas) with MuJoCo's lap_E pose and a ground-truth point in
         place of the model's p_E and the controller's p_R.
         """
-        b = self._body_E
-        d_z, P = self._scope_axis(self._xmat[b].reshape(3, 3))
-        e, depth = self._axis_error_and_depth(
-            self._xpos[b], d_z, P, np.ascontiguousarray(point, dtype=np.float64), float(self.scene.config.scope.length)
-        )
-        return float(e), float(depth)
+        point = np.ascontiguousarray(point, dtype=np.float64)  # the bound kernel's type
+        if point.shape != (3,):
+            raise ValueError(f"point must be 3 numbers, got shape {point.shape}")
+        return self._axis_offset(self._xpos, self._xmat, self._body_E, point, self._scope_length)
 
     def rcm_error(self) -> float:
         """Physical RCM error (m): distance from the current incision point (the trocar, which
