@@ -255,3 +255,25 @@ def test_a_run_yields_the_gil_before_each_read_only_while_other_threads_share_th
     st = loop.run(0.05)
     assert st.cycles >= 50 and loop.supervisor.at_rest
     assert sleeps == ([] if threads == 1 else [0] * st.cycles)
+
+
+def test_a_hold_cycle_while_running_stops_from_the_last_command_not_the_measured_pose() -> None:
+    """The measured joints lag the commands by a tracking error: holding from them would send that error as one
+    step. The supervisor's stop continues the command stream instead, within the acceleration limit, no alarm."""
+    loop, clock = _loop(wall_deadlines=False)
+    sent: list[np.ndarray] = []
+    command = loop.robot.command
+    loop.robot.command = lambda q: (sent.append(np.array(q)), command(q))[1]  # type: ignore[method-assign]
+    _cycles(loop, clock, 300)  # the hand moves the arm
+    read = loop.robot.read
+    lag = np.full(7, 2e-3)  # rad: a tracking error
+    loop.robot.read = lambda: (lambda r: type(r)(r.q - lag, r.dq, r.external_force, r.stamp))(read())  # type: ignore[method-assign]
+    for _ in range(5):
+        loop.hold_cycle()
+        clock[0] += DT
+    assert not loop.supervisor.alarm
+    assert any(e.kind == "stop" and "hold_cycle" in e.message for e in loop.supervisor.events)
+    q = np.array(sent[-8:])
+    acc = np.diff(q, 2, axis=0) / DT**2
+    assert np.all(np.abs(acc) <= loop.supervisor.limits.acceleration + 1e-6)
+    assert np.max(np.abs(q[-1] - q[-6])) < 1e-3  # no jump towards the measured pose

@@ -227,9 +227,13 @@ class ControlLoop:
         return out
 
     def hold_cycle(self) -> Vec:
-        """One cycle of the supervisor's stop alone (no controller): read, filter the measured pose, command."""
+        """One cycle of the supervisor's stop alone (no controller): read, filter, command. A supervisor still
+        running is stopped first (``hold_cycle`` event): its jerk-limited stop from its own last command, never
+        the measured pose, which lies a tracking error away from what the robot was sent (a step)."""
         reading = self.robot.read()
         t = self.session_time()
+        if self.supervisor.state is SupervisorState.RUNNING:
+            self.supervisor.stop(t, "hold_cycle: held without the controller")
         q_cmd = self.supervisor.filter(t, reading.q, q_measured=reading.q)
         self.robot.command(q_cmd)
         self.flush_events()
