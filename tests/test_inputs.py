@@ -8,7 +8,7 @@ import pickle
 import numpy as np
 import pytest
 
-from lapwrench.inputs import InputSpec, Reading, fresh_stamp, real_array
+from lapwrench.inputs import InputSpec, Reading, as_f64_c, fresh_stamp, is_f64_c, real_array
 
 SPEC = InputSpec("pedal", (2,), 0.0, 1.0, max_age=0.05)
 
@@ -74,3 +74,14 @@ def test_real_array_hands_on_a_float64_array_with_an_equal_dtype_of_its_own_as_i
     a[:] = 1.0
     assert a.dtype is own and own is not np.dtype(np.float64)
     assert real_array(a) is a
+
+
+def test_the_fast_path_predicate_takes_only_c_contiguous_float64_arrays_of_any_float64_dtype_object() -> None:
+    own = pickle.loads(pickle.dumps(np.dtype(np.float64)))
+    a = np.ones(7, dtype=own)
+    assert is_f64_c(a) and as_f64_c(a) is a  # an equal dtype of its own (numba's cached kernels): no copy
+    strided = np.ones(14)[::2]
+    for x in (strided, np.ones(7, dtype=np.float32), [1.0, 2.0], np.ones((3, 3)).T):
+        assert not is_f64_c(x)
+        y = as_f64_c(x)
+        assert is_f64_c(y) and np.array_equal(y, np.asarray(x, dtype=float))

@@ -25,7 +25,7 @@ import numpy as np
 
 from lapwrench import tick_entry as entry
 from lapwrench.allocation import nullspace_wrench
-from lapwrench.inputs import Reading, real_array
+from lapwrench.inputs import Reading, as_f64_c, is_f64_c, real_array
 from lapwrench.jit import bind
 from lapwrench.motion.measured_feedback import MeasuredFeedback
 from lapwrench.rcm.adaptive import AdaptiveRcm, AdaptiveState
@@ -70,16 +70,6 @@ class _Extra(NamedTuple):
     by_name: dict[str, Vec]  # every Python cue's wrench about p_G
     telemetry: dict[str, tuple[float, ...]]
     faults: tuple[str, ...]  # cues whose output was dropped this tick (non-finite), and why
-
-
-_F64 = np.dtype(np.float64)  # compared with ==: arrays from numba's cached kernels carry an equal one of their own
-
-
-def _f64(x: object) -> Vec:
-    """A C-contiguous float64 array (itself when it is one already): the bound argument type."""
-    if type(x) is np.ndarray and x.dtype == _F64 and x.flags.c_contiguous:
-        return x  # the common case (validated readings), checked cheaply
-    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 _ZERO3 = np.zeros(3)
@@ -150,8 +140,8 @@ class CompiledTick:
         stopping: bool, R_E0: Mat, may_admit: bool,
     ) -> entry.TickArgs:
         return (
-            *self._state_args(terms, inputs, placement), *_reading_args(inputs), _f64(ddq_ref), bool(stopping), R_E0,
-            bool(may_admit), self.sat, self.tare, self.params,
+            *self._state_args(terms, inputs, placement), *_reading_args(inputs), as_f64_c(ddq_ref), bool(stopping),
+            R_E0, bool(may_admit), self.sat, self.tare, self.params,
         )
 
     def _motion_args(
@@ -160,7 +150,7 @@ class CompiledTick:
     ) -> entry.MotionArgs:
         return (
             self._buf, s_star, *_reading_args(inputs), extra.W, extra.points, extra.D, extra.task_F,
-            _f64(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
+            as_f64_c(ddq_ref), bool(stopping), R_E0, float(self.feedback.offsets[3]), bool(may_admit), self.sat,
             self.params,
         )
 
@@ -339,7 +329,7 @@ class ReadOnlyInputs:
 
 def _vec3(x: object) -> Vec | None:
     """``x`` as a float64 3-vector if it holds three real numbers (not text, booleans or objects), else None."""
-    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (3,):
+    if is_f64_c(x) and x.shape == (3,):
         return x  # the common case, checked cheaply
     a = real_array(x)
     return a if a is not None and a.shape == (3,) else None

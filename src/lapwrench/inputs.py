@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -29,6 +29,18 @@ BUILT_IN_INPUTS = ("ft", "tactile", "instruments")
 
 _F64 = np.dtype(np.float64)  # compared with ==: arrays from numba's cached kernels carry an equal one of their own
 MAX_INPUT_VALUES = 4096  # a registered input's reading: a shared-memory slot of at most this many doubles
+
+
+def is_f64_c(x: object) -> TypeGuard[np.ndarray]:
+    """``x`` is a C-contiguous float64 array: what the bound kernels take as it is (the cheap check of the fast
+    paths). The dtype compared with ``==``, not ``is``: arrays from numba's cached kernels carry an equal
+    float64 dtype of their own."""
+    return type(x) is np.ndarray and x.dtype == _F64 and x.flags.c_contiguous
+
+
+def as_f64_c(x: object) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array: itself when it is one (:func:`is_f64_c`), the usual case."""
+    return x if is_f64_c(x) else np.ascontiguousarray(x, dtype=np.float64)
 
 
 def real_array(x: object) -> np.ndarray | None:

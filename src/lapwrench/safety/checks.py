@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.inputs import real_array
+from lapwrench.inputs import is_f64_c, real_array
 from lapwrench.jit import bind, kernel
 from lapwrench.rcm.geometry import axis_rcm_error_and_depth
 from lapwrench.robot.model import RobotModel
@@ -44,18 +44,13 @@ def measure_scope(model: RobotModel, q_measured: Vec, p_R: Vec) -> MeasuredScope
     and arrays of the wrong shape or of values that are not real numbers give NaN (the supervisor then
     holds): a broken driver's reading is a hold, never a traceback in the loop.
     """
-    q = q_measured if _is_f64_c(q_measured) else real_array(q_measured)
-    p = p_R if _is_f64_c(p_R) else real_array(p_R)
+    q = q_measured if is_f64_c(q_measured) else real_array(q_measured)
+    p = p_R if is_f64_c(p_R) else real_array(p_R)
     if q is None or p is None or q.shape != (model.nq,) or p.shape != (3,):
         return MeasuredScope(math.nan, math.nan)
     axis = model.scope_axis_into(q)  # the model's own arrays, used before its next evaluation
     e, depth = _axis_error_and_depth()(axis.p_E, axis.d_z, axis.P, p, float(model.length))
     return MeasuredScope(e, depth)
-
-
-def _is_f64_c(x: object) -> bool:
-    """``x`` is a C-contiguous float64 array (passed to a bound kernel as it is)."""
-    return type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous
 
 
 @functools.cache

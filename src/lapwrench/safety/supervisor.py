@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from lapwrench.inputs import real_array
+from lapwrench.inputs import is_f64_c, real_array
 from lapwrench.jit import bind
 from lapwrench.robot.limits import JointLimits
 from lapwrench.safety.checks import (
@@ -353,8 +353,7 @@ class SafetySupervisor(SupervisorWatches):
         if self._resume_left:
             q_cmd = self._resumed(q_cmd)
         problem: tuple[str, str] | None
-        if (type(q_cmd) is np.ndarray and q_cmd.dtype == np.float64 and q_cmd.flags.c_contiguous
-                and q_cmd.shape == self._q.shape):  # the usual command: checked and accepted in one compiled call
+        if is_f64_c(q_cmd) and q_cmd.shape == self._q.shape:  # the usual command: one compiled check
             code, j, value = self._accept_command(
                 q_cmd, self._history, self._lo, self._hi, float(self.cfg.position_tolerance), self._v_max,
                 self._a_max, self._j_max, self._stop_a, self._stop_j, self.dt,

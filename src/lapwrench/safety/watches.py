@@ -32,7 +32,7 @@ from collections import deque
 
 import numpy as np
 
-from lapwrench.inputs import real_array
+from lapwrench.inputs import is_f64_c, real_array
 from lapwrench.safety.checks import measured_joints_room, measured_step, nearest_limit
 from lapwrench.safety.config import SupervisorConfig, SupervisorEvent, SupervisorState
 from lapwrench.spatial import Vec
@@ -151,7 +151,7 @@ class SupervisorWatches:
     def _watch_joints(self, time: float, q_measured: Vec) -> None:
         c = self.cfg
         qm: np.ndarray | None = q_measured
-        if not (type(qm) is np.ndarray and qm.dtype == np.float64 and qm.flags.c_contiguous):
+        if not is_f64_c(qm):
             qm = real_array(q_measured)
         if qm is None:
             self._q_measured_seen = False
@@ -202,7 +202,7 @@ class SupervisorWatches:
                 f"[{c.depth_min * 1e3:.1f}, {c.depth_max * 1e3:.1f}] mm",
             )
         if residual is not None:
-            r = residual if type(residual) is np.ndarray and residual.dtype == np.float64 else real_array(residual)
+            r = residual if is_f64_c(residual) else real_array(residual)
             if r is None:
                 self._hold(time, "residual_force", f"measured residual force {residual!r:.80} is not real numbers")
                 return

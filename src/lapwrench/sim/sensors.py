@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from lapwrench.inputs import as_f64_c
 from lapwrench.jit import bind, kernel
 from lapwrench.robot.model import RobotModel
 from lapwrench.sensors import ForceTorqueReading, TactileReading
@@ -251,11 +252,6 @@ def _observer_step(
     return True
 
 
-def _f64_vector(x: np.ndarray) -> np.ndarray:
-    """``x`` as a C-contiguous float64 array (itself when it is one, the usual case)."""
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.flags.c_contiguous:
-        return x
-    return np.ascontiguousarray(x, dtype=float)
 
 
 class ExternalForceObserver:
@@ -302,7 +298,7 @@ class ExternalForceObserver:
         m, d = self.model.model, self._data
         # The bound kernel takes C-contiguous float64 vectors of the model's size, exactly.
         nv = m.nv
-        q, dq, tau_J = _f64_vector(q), _f64_vector(dq), _f64_vector(tau_J)
+        q, dq, tau_J = as_f64_c(q), as_f64_c(dq), as_f64_c(tau_J)
         if dq.shape != (nv,) or tau_J.shape != (nv,):
             dq, tau_J = (np.ascontiguousarray(np.broadcast_to(x, (nv,)), dtype=float) for x in (dq, tau_J))
         # Pinocchio hands out fresh C-ordered arrays (ascontiguousarray returns them as they are).

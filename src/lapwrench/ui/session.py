@@ -227,10 +227,7 @@ class Session:
             self._change_cycle()
             return None
         if self.held is not None:
-            c.loop.hold_cycle()  # the supervisor holds the arm; the world (hand, housing) goes on
-            if self._disturbance is not None:
-                self._disturbance.apply(c.world, c.t)
-            c.t += CONTROL_DT
+            self._held_cycle()
             return None
         dist = self._disturbance
         before = None if dist is None else (lambda t: dist.apply(c.world, c.t))
@@ -243,15 +240,20 @@ class Session:
         self._last = res
         return res
 
-    def _change_cycle(self) -> None:
-        """One cycle of the stop before a parameter change (the supervisor's jerk-limited stop, no
-        controller); at rest the loop restarts with the new parameters. An alarm during the stop holds the
-        arm as any alarm does; the change then waits for the resume."""
+    def _held_cycle(self) -> None:
+        """One cycle of the supervisor's stop or hold, no controller; the world (hand, housing) goes on."""
         c = self.closed
         c.loop.hold_cycle()
         if self._disturbance is not None:
             self._disturbance.apply(c.world, c.t)
         c.t += CONTROL_DT
+
+    def _change_cycle(self) -> None:
+        """One cycle of the stop before a parameter change (the supervisor's jerk-limited stop, no
+        controller); at rest the loop restarts with the new parameters. An alarm during the stop holds the
+        arm as any alarm does; the change then waits for the resume."""
+        self._held_cycle()
+        c = self.closed
         sup = c.supervisor
         if sup.alarm:
             self._changing = False
