@@ -60,6 +60,7 @@ def test_huge_and_infinite_numbers_are_refused(data: dict, match: str) -> None:
         ({"scope": {"oblique_angle_deg": 90.0}}, "scope.oblique_angle_deg"),
         ({"scope": {"handle_offset": 0.3}}, "scope.handle_offset"),
         ({"envelope": {"roll_range": 4.0}}, "envelope.roll_range"),
+        ({"envelope": {"roll_range": 3.1416}}, "envelope.roll_range"),  # its wall would sit on the wrap at pi
         ({"envelope": {"depth_max": 0.3}}, "envelope.depth_max"),
         ({"envelope": {"pivot_speed_max": 1e9}}, "envelope.pivot_speed_max"),
         ({"safety": {"max_residual_force": 1e9}}, "safety.max_residual_force"),

@@ -191,7 +191,11 @@ class EnvelopeConfig:
     insertion_deceleration: float = ranged("(0, 50]", 0.5, "m/s^2")
     depth_min: float = ranged("(0, 0.6)", 0.03, "m of scope beyond p_R, shorter than scope.length")
     depth_max: float = ranged("(0, 0.6)", 0.12, "m of scope beyond p_R, shorter than scope.length")
-    roll_range: float = ranged("(0, pi]", 1.5708, "rad, |roll| about the shaft from the start pose")
+    roll_range: float = ranged(
+        "(0, 3.1]", 1.5708,
+        "rad, |roll| about the shaft from the start pose; at most 3.1: the roll wraps at +-pi, and a wall at pi let"
+        " its 2 mrad overshoot wrap past it (a 1 N m twist turned the scope on to 4.0 rad)",
+    )
     roll_speed_max: float = ranged("(0, 10]", 1.0, "rad/s")
 
 

@@ -75,6 +75,17 @@ def test_a_torque_about_the_shaft_stops_at_the_roll_range_and_speed() -> None:
     assert abs(abs(r["roll"][-1]) - cfg_roll) < 0.01
 
 
+def test_the_roll_wall_at_the_largest_range_allowed_holds() -> None:
+    """Near +-pi the roll angle wraps: a wall at pi let the scope's 2 mrad overshoot wrap past it, and a twist of
+    1 N m turned the scope on to 4.0 rad (the config refuses a range beyond 3.1 rad since). At 3.1 the wall holds,
+    measured unwrapped (the joints let the roll go past pi this way)."""
+    cfg = CFG.replace(envelope={"roll_range": 3.1, "roll_speed_max": 1.5})
+    hand = HandScript(force=lambda t: np.zeros(3), torque=lambda t: np.array([0.0, 0.0, 1.0]), delta=lambda t: 2.0)
+    ctrl, log = run_virtual(cfg, 5.0, hand=hand)
+    roll = np.unwrap(_rates(ctrl, log)["roll"])
+    assert 3.09 < roll.max() <= 3.1 + 0.005 and abs(roll[-1] - 3.1) < 0.005
+
+
 def test_roll_angle_is_the_twist_about_the_shaft_only() -> None:
     R0 = pin.rpy.rpyToMatrix(0.3, -0.2, 0.5)
     d0 = R0[:, 2]
