@@ -58,7 +58,9 @@ def test_demo_video_of_a_tracking_scenario(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"scenarios": ["grip", "laparotomy"]}, "unknown scenario laparotomy"),
+        ({"scenarios": ["grip", "laparotomy"]}, "unknown scenario 'laparotomy'"),
+        ({"scenarios": [""]}, r"unknown scenario '' \(an empty name\)"),
+        ({"scenarios": ["grip,zoom"]}, r"unknown scenario 'grip,zoom'.*separated by spaces"),
         ({"config": "/nonexistent/c.yaml"}, "config file not found"),
         ({"time_scale": 3.0}, "time scale"),
         ({"detector": "/nonexistent/model.onnx"}, "detector must be.*not found"),

@@ -70,7 +70,8 @@ def plan_demo(
     names = tuple(scenarios or SCENARIOS)
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
-        raise DemoError(f"unknown scenario {', '.join(n[:60] for n in unknown)}; choose from {', '.join(SCENARIOS)}")
+        what = ", ".join(repr(n[:60]) if n.strip() else "'' (an empty name)" for n in unknown)
+        raise DemoError(f"unknown scenario {what}; choose from {', '.join(SCENARIOS)} (separated by spaces)")
     if detector not in ("shipped", "classical", "projected") and not Path(detector).is_file():
         raise DemoError(
             f"detector must be shipped, classical, projected or a model file; {detector[:60]!r} "
