@@ -99,11 +99,12 @@ def geometry_stage(
     twist = matvec(kin.J_E, kin.dq)
     F_lat = adaptive_rcm_step(rcm, kin.P, residual, has_residual, twist, p.dt, adaptive)
     p_R = rcm.p_R.copy()
-    e_R = rcm_error(kin, p_R)
-    feedback_step(offsets, measured, has_measured, kin, p_R, e_R, p.length, p.feedback_gain, p.feedback_cap)
+    axis = ScopeAxis(kin.p_E, kin.d_z, kin.P)  # for what reads only these: 2 atomic refcounts per array handed on
+    e_R = rcm_error(axis, p_R)
+    feedback_step(offsets, measured, has_measured, axis, p_R, e_R, p.length, p.feedback_gain, p.feedback_cap)
     J_R = lateral_rcm_jacobian(kin, p_R) if p.lateral else rcm_jacobian(kin, p_R)
-    s_star = closest_point_parameter(kin, p_R, p.length)
-    p_G, o_G = closest_point(kin, s_star, p.length)
+    s_star = closest_point_parameter(axis, p_R, p.length)
+    p_G, o_G = closest_point(axis, s_star, p.length)
     velocity = rcm.velocity.copy()
     geo = TaskGeometry(
         p_R, velocity, e_R, rcm_error_rate(kin, J_R, velocity), J_R, s_star, p_G, o_G,
@@ -387,10 +388,8 @@ def tick_stage(
 
     Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
     """
-    kin, geo, F_lat, residual, has_residual, force, torque = tick_front(
-        terms, rcm, adaptive, ext_force, has_ext, offsets, R_measured, p_measured, has_measured, ft_force, ft_torque,
-        has_ft, tactile, has_tactile, tare, p,
-    )
+    kin, geo, F_lat, residual, has_residual, force, torque = tick_front(terms, rcm, adaptive, ext_force, has_ext,
+        offsets, R_measured, p_measured, has_measured, ft_force, ft_torque, has_ft, tactile, has_tactile, tare, p)
     W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
         kin, geo, force, torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
         np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,

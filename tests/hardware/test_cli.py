@@ -118,6 +118,17 @@ def test_run_refuses_a_control_rate_the_franka_does_not_run_at(
     assert code == 2 and "control_rate_hz must be 1000" in err
 
 
+def test_run_refuses_the_printed_euler_step_with_the_printed_damping_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Refused before the loop's process starts (there it was a 'robot error' with a traceback)."""
+    cfg = tmp_path / "explicit.yaml"
+    cfg.write_text("motion: {integrator: explicit}\n")
+    code = hw.run_main(run_args(dry_run=True, config=str(cfg), duration=1))
+    err = capsys.readouterr().err
+    assert code == 2 and "motion.integrator: explicit" in err and "Traceback" not in err and len(err.splitlines()) == 1
+
+
 @pytest.mark.parametrize("error", [TimeoutError("timed out"), OSError(113, "No route to host")])
 def test_run_names_an_unreachable_robot_at_once(
     error: OSError, monkeypatch: pytest.MonkeyPatch, no_run: list, capsys: pytest.CaptureFixture[str]

@@ -73,6 +73,16 @@ def test_bad_demo_inputs_fail_before_any_simulation(tmp_path: Path, kwargs: dict
     assert not (tmp_path / "out" / "report.md").exists()
 
 
+def test_the_printed_euler_step_with_the_printed_damping_is_refused_before_any_simulation(tmp_path: Path) -> None:
+    cfg = tmp_path / "explicit.yaml"
+    cfg.write_text("motion: {integrator: explicit}\n")
+    with pytest.raises(demo_mod.DemoError, match=r"motion\.integrator: explicit.*viscous\.k_t.*semi_implicit"):
+        demo_mod.plan_demo(tmp_path / "out", config=str(cfg))
+    assert not (tmp_path / "out").exists()
+    cfg.write_text("motion: {integrator: explicit}\nviscous: {k_t: 1.0, k_t_unguided: 1.0}\n")
+    demo_mod.plan_demo(tmp_path / "out", config=str(cfg), scenarios=["grip"])  # within its bound: planned
+
+
 def test_malformed_config_and_unwritable_folder(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("tracking: {epsilon1: 300}\n")

@@ -223,7 +223,10 @@ def run_main(args: argparse.Namespace) -> int:
         cfg = cfg.replace(robot={"kind": "fr3"})
     try:
         _check_run_arguments(args, cfg, simulated=bool(args.dry_run or frankysim))
-    except CliError as exc:
+        from lapwrench.controller import check_explicit_step_at_home
+
+        check_explicit_step_at_home(cfg)  # else refused in the loop's process, as a robot error
+    except (CliError, config_mod.ConfigError) as exc:
         print(f"lapwrench run: {exc}", file=sys.stderr)
         return 2
     if getattr(args, "in_process", False):

@@ -31,7 +31,7 @@ NO_PLACEMENT = (np.asfortranarray(np.eye(3)), np.zeros(3))
 
 @kernel
 def feedback_step(
-    offsets: Vec, measured: ScopeAxis, has_measured: bool, kin: Kinematics, p_R: Vec, e_R: Vec,
+    offsets: Vec, measured: ScopeAxis, has_measured: bool, kin: Kinematics | ScopeAxis, p_R: Vec, e_R: Vec,
     length: float, gain: float, cap: float,
 ) -> None:
     """One low-pass step of ``offsets`` = [e_offset (3); depth_offset] in place (module docstring).

@@ -162,14 +162,14 @@ def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
 
 
 @kernel
-def closest_point_parameter(kin: Kinematics, p_R: Vec, length: float) -> float:
+def closest_point_parameter(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
     s = _axial(kin, p_R) / length
     return min(1.0, max(0.0, s))
 
 
 @kernel
-def closest_point(kin: Kinematics, s_star: float, length: float) -> tuple[Vec, Vec]:
+def closest_point(kin: Kinematics | ScopeAxis, s_star: float, length: float) -> tuple[Vec, Vec]:
     """Eqs (31)-(32): p_G = p_E + s* L d_z and its offset o_G = s* L d_z."""
     o_G = s_star * length * kin.d_z
     return kin.p_E + o_G, o_G

@@ -23,6 +23,7 @@ import mujoco
 
 from lapwrench import __version__
 from lapwrench import config as config_mod
+from lapwrench.controller import check_explicit_step_at_home
 from lapwrench.jit import cache_is_warm
 from lapwrench.robot_kinds import ROBOT_KINDS, unknown_kind_message
 from lapwrench.sim import report
@@ -107,6 +108,11 @@ def plan_demo(
                 f"robot.control_rate_hz must be {1.0 / CONTROL_DT:.0f} (the simulated Franka runs at 1 kHz), "
                 f"got {c.robot.control_rate_hz}"
             )
+    try:
+        for c in (base, tracking):  # refused at each scenario's start as well; said here, before any
+            check_explicit_step_at_home(c)
+    except config_mod.ConfigError as exc:
+        raise DemoError(str(exc)) from exc
     check_detector(detector, tracking)
     try:
         out = config_mod.ensure_writable_dir(out)
