@@ -1,0 +1,171 @@
+"""The stop signals of every ``lapwrench`` command.
+
+SIGINT (Ctrl-C), SIGTERM (``kill``, a service manager) and SIGHUP (a closed terminal) end a command with
+one line on stderr (``lapwrench <command>: interrupted``, or ``... stopped by SIGTERM``) and exit code
+128 + the signal's number (130, 143, 129), never a traceback:
+
+* while the program starts (its imports, the parser's, the arguments' parsing) nothing is open or
+  written: :func:`exit_at_once` ends it at once. :mod:`lapwrench.cli` installs it before its other
+  imports, which is why this module imports only the standard library's basics;
+* while a command runs (:func:`stop_once`), :class:`StopOnce` raises :class:`Stopped` (a
+  ``KeyboardInterrupt``) for the first signal, so that the command's own handlers and ``finally`` blocks
+  close what it opened, and ignores the later ones; a signal that comes inside an import waits for its
+  end (a module cut halfway cannot be imported again: the clean-up's next import of it would fail with a
+  traceback), and one that lands where Python cannot raise (a callback from C code) is sent again.
+
+A signal the shell left ignored (``nohup``, a background job of a script) stays ignored. ``run``,
+``demo`` and ``ui`` install a stop of their own over these while they run.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from types import FrameType
+from typing import Any
+
+from lapwrench.spawn import STOP_SIGNALS
+
+IMPORT_WAIT_S = 5.0
+"""A signal that comes inside an import waits at most this long for its end (then it raises there)."""
+RETRY_S = 0.02  # how often a waiting signal is sent again
+
+Handler = Callable[[int, FrameType | None], object] | int | None
+"""A signal's disposition as :func:`signal.getsignal` gives it."""
+
+
+def stop_line(command: str | None, signum: int) -> str:
+    """The one line for a stop signal: ``lapwrench demo: interrupted`` (SIGINT), ``... stopped by SIGTERM``."""
+    how = "interrupted" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
+    return f"lapwrench{f' {command}' if command else ''}: {how}"
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal while a command runs (:class:`StopOnce`); the exit code is 128 + ``signum``."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def exit_at_once(signum: int, _frame: FrameType | None) -> None:
+    """The handler while the program starts: its line and exit code at once, whatever runs (a module's
+    import, a destructor: no exception that could escape as a traceback)."""
+    with contextlib.suppress(OSError):  # stderr closed
+        os.write(2, f"{stop_line(None, signum)}\n".encode())
+    os._exit(128 + signum)
+
+
+def exit_quietly(signum: int, _frame: FrameType | None) -> None:
+    """The handler once a stop signal's line is out (the command ended by it, Python exiting): the exit code
+    at once, no second line."""
+    os._exit(128 + signum)
+
+
+def importing(frame: FrameType | None) -> bool:
+    """Whether ``frame`` runs inside an import (the import machinery is on its stack)."""
+    while frame is not None:
+        if frame.f_code.co_filename.startswith("<frozen importlib._bootstrap"):
+            return True
+        frame = frame.f_back
+    return False
+
+
+class StopOnce:
+    """The handler while a command runs: the first signal raises :class:`Stopped` (``signum`` keeps it),
+    the later ones are ignored. Inside an import the signal is sent again every :data:`RETRY_S` until
+    the import is over, for at most :data:`IMPORT_WAIT_S`; one that Python swallowed (raised in a
+    callback from C code, a destructor: :meth:`unraisable`) is sent again too. :func:`stop_once` installs it."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.raised = False
+        self._until = 0.0
+        self._retry: threading.Timer | None = None
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        if self.raised:
+            return
+        if self.signum is None:
+            self.signum, self._until = signum, time.monotonic() + IMPORT_WAIT_S
+        if importing(frame) and time.monotonic() < self._until:
+            self._send_again()
+            return
+        self.raised = True
+        raise Stopped(self.signum)
+
+    def unraisable(self, exc: BaseException | None) -> bool:
+        """Whether ``exc``, an exception Python could not raise (``sys.unraisablehook``: it came in a
+        callback from C code, numba's compiler's say, or in a destructor, and would be printed with its
+        traceback, then dropped), is this handler's :class:`Stopped`: then the signal is sent again."""
+        if not isinstance(exc, Stopped) or self.signum is None:
+            return False
+        self.raised = False
+        self._send_again()
+        return True
+
+    def _send_again(self) -> None:
+        if self._retry is None or not self._retry.is_alive():
+            self._retry = threading.Timer(RETRY_S, os.kill, (os.getpid(), self.signum))
+            self._retry.daemon = True
+            self._retry.start()
+
+
+@contextlib.contextmanager
+def stop_once() -> Iterator[StopOnce]:
+    """Within the block the stop signals raise once (:class:`StopOnce`), and a :class:`Stopped` that Python
+    could not raise is sent again rather than printed; the handlers and ``sys.unraisablehook`` are back
+    after it."""
+    stop = StopOnce()
+    previous = handle_stop_signals(stop)
+    hook = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        if not stop.unraisable(info.exc_value):
+            hook(info)
+
+    sys.unraisablehook = unraisable
+    try:
+        yield stop
+    finally:
+        sys.unraisablehook = hook
+        restore(previous)
+
+
+def signal_of(exc: BaseException) -> int:
+    """The number of the stop signal behind a ``KeyboardInterrupt``: a :class:`Stopped`'s own; for a plain
+    one, the signal the :class:`StopOnce` in place took (Ray's waits turn the exception the handler raised
+    into a new KeyboardInterrupt, without it); else SIGINT (Python's own Ctrl-C)."""
+    signum = getattr(exc, "signum", None)
+    if isinstance(signum, int):
+        return signum
+    for sig in STOP_SIGNALS:
+        handler = signal.getsignal(sig)
+        if isinstance(handler, StopOnce) and handler.signum is not None:
+            return handler.signum
+    return signal.SIGINT
+
+
+def handle_stop_signals(handler: Handler) -> dict[signal.Signals, Handler]:
+    """Install ``handler`` for every stop signal the shell did not leave ignored; returns the handlers it
+    replaced (for :func:`restore`). Outside the main thread (where Python allows no handler) nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    previous: dict[signal.Signals, Handler] = {}
+    for sig in STOP_SIGNALS:
+        old = signal.getsignal(sig)
+        if old != signal.SIG_IGN:
+            previous[sig] = old
+            signal.signal(sig, handler)
+    return previous
+
+
+def restore(previous: dict[signal.Signals, Handler]) -> None:
+    """Put back the handlers :func:`handle_stop_signals` replaced (one not set from Python: the default)."""
+    for sig, handler in previous.items():
+        signal.signal(sig, handler if handler is not None else signal.SIG_DFL)

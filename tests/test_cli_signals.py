@@ -1,0 +1,156 @@
+"""The stop signals of every command (:mod:`lapwrench.cli_signals`): the line and exit code, the handler
+that raises once, and a signal that comes inside an import waiting for its end."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from lapwrench.cli_signals import (
+    StopOnce,
+    Stopped,
+    handle_stop_signals,
+    importing,
+    restore,
+    signal_of,
+    stop_line,
+    stop_once,
+)
+from lapwrench.spawn import STOP_SIGNALS
+
+
+@pytest.fixture
+def kept_handlers() -> Iterator[None]:
+    """The stop signals' handlers as they were, after the test."""
+    before = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    yield
+    for sig, handler in before.items():
+        signal.signal(sig, handler)
+
+
+def test_the_line_names_the_command_and_the_signal() -> None:
+    assert stop_line("demo", signal.SIGINT) == "lapwrench demo: interrupted"
+    assert stop_line("log-report", signal.SIGTERM) == "lapwrench log-report: stopped by SIGTERM"
+    assert stop_line(None, signal.SIGHUP) == "lapwrench: stopped by SIGHUP"
+
+
+def test_the_first_signal_raises_stopped_and_the_later_ones_are_ignored(kept_handlers: None) -> None:
+    stop = StopOnce()
+    handle_stop_signals(stop)
+    with pytest.raises(Stopped) as info:
+        signal.raise_signal(signal.SIGTERM)
+    assert info.value.signum == signal.SIGTERM and isinstance(info.value, KeyboardInterrupt)
+    signal.raise_signal(signal.SIGINT)  # the command is closing what it opened: ignored
+    signal.raise_signal(signal.SIGHUP)
+    assert stop.signum == signal.SIGTERM
+
+
+def test_the_signal_behind_a_plain_keyboard_interrupt_is_the_one_the_handler_took(kept_handlers: None) -> None:
+    """Ray's waits turn the Stopped our handler raises into a new, plain KeyboardInterrupt: a SIGTERM of a
+    sweep was reported as Ctrl-C (exit 130). The handler in place still knows which signal it was."""
+    assert signal_of(KeyboardInterrupt()) == signal.SIGINT  # Python's own Ctrl-C
+    with stop_once():
+        with pytest.raises(Stopped):
+            signal.raise_signal(signal.SIGTERM)
+        assert signal_of(KeyboardInterrupt()) == signal.SIGTERM
+    assert signal_of(Stopped(signal.SIGHUP)) == signal.SIGHUP
+
+
+def test_a_signal_the_shell_left_ignored_stays_ignored_and_restore_puts_back_the_others(kept_handlers: None) -> None:
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as nohup leaves it
+    before_int = signal.getsignal(signal.SIGINT)
+    previous = handle_stop_signals(StopOnce())
+    assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN and signal.SIGHUP not in previous
+    assert isinstance(signal.getsignal(signal.SIGINT), StopOnce)
+    restore(previous)
+    assert signal.getsignal(signal.SIGINT) is before_int
+
+
+def test_importing_sees_the_import_machinery_on_the_stack() -> None:
+    assert not importing(inspect.currentframe())
+
+
+def test_a_signal_inside_an_import_waits_for_its_end(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kept_handlers: None
+) -> None:
+    """A module cut halfway stays half-made (pandas: the next import of it fails with a traceback): the
+    signal that comes while one is imported is taken once the import is over, and the module is whole."""
+    name = "lapwrench_test_slow_module"
+    (tmp_path / f"{name}.py").write_text(textwrap.dedent("""
+        import os, signal, time
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C while this module is imported
+        for _ in range(20):  # more module code after it: bytecode, where a handler runs
+            time.sleep(0.005)
+        WHOLE = True
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    handle_stop_signals(StopOnce())
+    with pytest.raises(Stopped):
+        module = importlib.import_module(name)
+        assert module.WHOLE
+        time.sleep(30)  # the command goes on: the signal, sent again, stops it here
+    assert sys.modules[name].WHOLE
+    del sys.modules[name]
+
+
+class SignalledWhenCollected:
+    """An object whose destructor gets a SIGTERM: Python cannot raise there (as in a callback from C code,
+    numba's compiler's), and prints the exception with its traceback, then drops it."""
+
+    def __del__(self) -> None:
+        signal.raise_signal(signal.SIGTERM)
+
+
+def test_a_stop_python_could_not_raise_is_not_printed_but_sent_again(
+    capsys: pytest.CaptureFixture[str], kept_handlers: None
+) -> None:
+    hook = sys.unraisablehook
+    with pytest.raises(Stopped) as info, stop_once() as stop:
+        SignalledWhenCollected()  # collected at once: its destructor is signalled
+        time.sleep(10)  # the command goes on: the signal, sent again, stops it here
+    assert info.value.signum == signal.SIGTERM and stop.signum == signal.SIGTERM
+    assert "Traceback" not in capsys.readouterr().err and sys.unraisablehook is hook
+
+
+CONSOLE_SCRIPT = str(Path(sys.executable).with_name("lapwrench"))  # what pip installed: `lapwrench ...`
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("entry", "sig"), [([sys.executable, "-m", "lapwrench"], signal.SIGINT),
+                                            ([sys.executable, "-m", "lapwrench"], signal.SIGTERM),
+                                            ([CONSOLE_SCRIPT], signal.SIGINT)])
+def test_a_signal_at_any_moment_of_a_command_is_one_line_and_128_plus_its_number(
+    entry: list[str], sig: signal.Signals, tmp_path: Path
+) -> None:
+    """``lapwrench virtual``, signalled from lapwrench.cli's imports on (Python's import-time report says when
+    they are under way; before them Python itself starts, out of lapwrench's reach) to the run itself: one
+    line, 130 or 143, never a traceback."""
+    env = {**os.environ, "PYTHONPROFILEIMPORTTIME": "1", "MUJOCO_GL": "egl"}
+    expected = {stop_line(None, sig), stop_line("virtual", sig)}
+    for delay in (0.0, 0.05, 0.2, 0.5, 1.0, 2.0, 3.0, 5.0):
+        proc = subprocess.Popen(
+            [*entry, "virtual", "--duration", "30", "--quiet", "--out", str(tmp_path)],
+            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a terminal's foreground job
+        )
+        assert proc.stderr is not None
+        for line in proc.stderr:  # argparse: lapwrench.cli's first import after its handlers went in
+            if line.split("|")[-1].strip() == "argparse":
+                break
+        time.sleep(delay)
+        proc.send_signal(sig)
+        err = proc.stderr.read()
+        proc.wait(timeout=120)
+        lines = [x for x in err.splitlines() if not x.startswith("import time:")]
+        assert "Traceback" not in err and proc.returncode == 128 + sig, (delay, err[-3000:])
+        assert len(lines) == 1 and lines[0] in expected, (delay, lines)
