@@ -346,7 +346,7 @@ def test_sigterm_in_a_command_is_one_line_and_exit_143(
 
     def killed(*_args: object) -> int:
         os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(30)  # the signal stops it here
+        time.sleep(30)  # the signal stops it here (within cli_signals.WAIT_S: this code is not lapwrench's)
         return 0
 
     def not_handled(*_args: object) -> None:
@@ -377,7 +377,11 @@ def test_an_error_on_the_way_out_after_ctrl_c_is_the_stop_line(
         return 0
 
     monkeypatch.setattr(hardware_cli, "log_report_main", interrupted)
-    assert main(["log-report", "run.mcap"]) == 130
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)  # whatever the runner left (SIG_IGN)
+    try:
+        assert main(["log-report", "run.mcap"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, before)
     assert capsys.readouterr().err == "lapwrench log-report: interrupted\n"
 
 

@@ -14,6 +14,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lapwrench.cli_signals import (
@@ -21,6 +22,7 @@ from lapwrench.cli_signals import (
     Stopped,
     handle_stop_signals,
     importing,
+    raisable,
     restore,
     signal_of,
     stop_line,
@@ -28,11 +30,24 @@ from lapwrench.cli_signals import (
 )
 from lapwrench.spawn import STOP_SIGNALS
 
+OWN = (str(Path(__file__).parent) + os.sep,)  # this file's code counts as lapwrench's own (raisable)
+
+
+class NotHandledError(Exception):
+    """What a stop signal raises in a test when no lapwrench handler took it."""
+
+
+def not_handled(signum: int, _frame: object) -> None:
+    raise NotHandledError(signal.Signals(signum).name)
+
 
 @pytest.fixture
 def kept_handlers() -> Iterator[None]:
-    """The stop signals' handlers as they were, after the test."""
+    """Every stop signal handled by the test (whatever the runner left: pytest-xdist's worker, a shell's
+    SIG_IGN), then the handlers as they were."""
     before = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, not_handled)
     yield
     for sig, handler in before.items():
         signal.signal(sig, handler)
@@ -45,21 +60,22 @@ def test_the_line_names_the_command_and_the_signal() -> None:
 
 
 def test_the_first_signal_raises_stopped_and_the_later_ones_are_ignored(kept_handlers: None) -> None:
-    stop = StopOnce()
-    handle_stop_signals(stop)
-    with pytest.raises(Stopped) as info:
-        signal.raise_signal(signal.SIGTERM)
-    assert info.value.signum == signal.SIGTERM and isinstance(info.value, KeyboardInterrupt)
-    signal.raise_signal(signal.SIGINT)  # the command is closing what it opened: ignored
-    signal.raise_signal(signal.SIGHUP)
+    with stop_once(OWN) as stop:
+        with pytest.raises(Stopped) as info:
+            signal.raise_signal(signal.SIGTERM)
+        assert info.value.signum == signal.SIGTERM and isinstance(info.value, KeyboardInterrupt)
+        signal.raise_signal(signal.SIGINT)  # the command is closing what it opened: ignored
+        signal.raise_signal(signal.SIGHUP)
     assert stop.signum == signal.SIGTERM
+    with pytest.raises(NotHandledError):  # the handlers of before the block are back
+        signal.raise_signal(signal.SIGTERM)
 
 
 def test_the_signal_behind_a_plain_keyboard_interrupt_is_the_one_the_handler_took(kept_handlers: None) -> None:
     """Ray's waits turn the Stopped our handler raises into a new, plain KeyboardInterrupt: a SIGTERM of a
     sweep was reported as Ctrl-C (exit 130). The handler in place still knows which signal it was."""
     assert signal_of(KeyboardInterrupt()) == signal.SIGINT  # Python's own Ctrl-C
-    with stop_once():
+    with stop_once(OWN):
         with pytest.raises(Stopped):
             signal.raise_signal(signal.SIGTERM)
         assert signal_of(KeyboardInterrupt()) == signal.SIGTERM
@@ -80,6 +96,18 @@ def test_importing_sees_the_import_machinery_on_the_stack() -> None:
     assert not importing(inspect.currentframe())
 
 
+def test_only_lapwrench_s_own_code_is_raisable() -> None:
+    """Not a library's Python code (it may be a callback from C code: numba's dispatch dropped the exception,
+    or a Pinocchio call crashed after it), nor code outside lapwrench unless named as its own."""
+    here = inspect.currentframe()
+    assert here is not None and here.f_back is not None
+    assert raisable(here, OWN, here.f_back) and not raisable(here, base=here.f_back)  # this file: not lapwrench's
+    assert not raisable(here, OWN, here.f_back.f_back)  # pytest's Python code below it: a library's
+    seen: list[bool] = []
+    np.apply_along_axis(lambda row: seen.append(raisable(inspect.currentframe(), OWN, here)) or row, 0, np.zeros(1))
+    assert seen == [False]  # numpy's Python code between the callback and the test
+
+
 def test_a_signal_inside_an_import_waits_for_its_end(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kept_handlers: None
 ) -> None:
@@ -94,8 +122,7 @@ def test_a_signal_inside_an_import_waits_for_its_end(
         WHOLE = True
     """))
     monkeypatch.syspath_prepend(str(tmp_path))
-    handle_stop_signals(StopOnce())
-    with pytest.raises(Stopped):
+    with pytest.raises(Stopped), stop_once(OWN):
         module = importlib.import_module(name)
         assert module.WHOLE
         time.sleep(30)  # the command goes on: the signal, sent again, stops it here
@@ -115,7 +142,7 @@ def test_a_stop_python_could_not_raise_is_not_printed_but_sent_again(
     capsys: pytest.CaptureFixture[str], kept_handlers: None
 ) -> None:
     hook = sys.unraisablehook
-    with pytest.raises(Stopped) as info, stop_once() as stop:
+    with pytest.raises(Stopped) as info, stop_once(OWN) as stop:
         SignalledWhenCollected()  # collected at once: its destructor is signalled
         time.sleep(10)  # the command goes on: the signal, sent again, stops it here
     assert info.value.signum == signal.SIGTERM and stop.signum == signal.SIGTERM

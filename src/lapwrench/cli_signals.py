@@ -9,9 +9,11 @@ one line on stderr (``lapwrench <command>: interrupted``, or ``... stopped by SI
   imports, which is why this module imports only the standard library's basics;
 * while a command runs (:func:`stop_once`), :class:`StopOnce` raises :class:`Stopped` (a
   ``KeyboardInterrupt``) for the first signal, so that the command's own handlers and ``finally`` blocks
-  close what it opened, and ignores the later ones; a signal that comes inside an import waits for its
-  end (a module cut halfway cannot be imported again: the clean-up's next import of it would fail with a
-  traceback), and one that lands where Python cannot raise (a callback from C code) is sent again.
+  close what it opened, and ignores the later ones. It is raised only in lapwrench's own code
+  (:func:`raisable`): a signal that comes inside an import waits for its end (a module cut halfway cannot
+  be imported again: the clean-up's next import of it would fail with a traceback), and one that comes
+  in a library's code (numba's dispatch, matplotlib, a callback from C code) waits until the library
+  returns (raised there, it was dropped, or left memory corrupt: a crash).
 
 A signal the shell left ignored (``nohup``, a background job of a script) stays ignored. ``run``,
 ``demo`` and ``ui`` install a stop of their own over these while they run.
@@ -20,9 +22,11 @@ A signal the shell left ignored (``nohup``, a background job of a script) stays 
 from __future__ import annotations
 
 import contextlib
+import inspect
 import os
 import signal
 import sys
+import sysconfig
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -31,8 +35,12 @@ from typing import Any
 
 from lapwrench.spawn import STOP_SIGNALS
 
-IMPORT_WAIT_S = 5.0
-"""A signal that comes inside an import waits at most this long for its end (then it raises there)."""
+WAIT_S = 5.0
+"""A signal that comes where it cannot be raised safely (:func:`raisable`) waits at most this long for the
+command to be back in code where it can (then it raises where it is, as Python's own Ctrl-C would)."""
+
+PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+STDLIB_DIR = sysconfig.get_paths()["stdlib"] + os.sep
 RETRY_S = 0.02  # how often a waiting signal is sent again
 
 Handler = Callable[[int, FrameType | None], object] | int | None
@@ -76,13 +84,35 @@ def importing(frame: FrameType | None) -> bool:
     return False
 
 
+def raisable(frame: FrameType | None, own: tuple[str, ...] = (), base: FrameType | None = None) -> bool:
+    """Whether an exception may be raised in ``frame``: every frame of its stack above ``base`` (the frame
+    that runs the command; None: the whole stack) is lapwrench's, the standard library's (not the packages
+    installed beside it) or under one of the folders ``own``, and none is an import's. A library's Python
+    code may run as a callback from C code that does not pass the exception on, or that a call cut halfway
+    leaves corrupt: raised in numba's dispatch, a SIGTERM was dropped (the command ran on and ended with 0)
+    or the next Pinocchio call crashed (SIGSEGV); a module cut halfway cannot be imported again."""
+    ours = (PACKAGE_DIR, *own)
+    while frame is not None and frame is not base:
+        name = frame.f_code.co_filename
+        installed = f"{os.sep}site-packages{os.sep}" in name or f"{os.sep}dist-packages{os.sep}" in name
+        if name.startswith("<frozen importlib._bootstrap") or not (
+            name.startswith(("<", *ours)) or (name.startswith(STDLIB_DIR) and not installed)
+        ):
+            return False
+        frame = frame.f_back
+    return True
+
+
 class StopOnce:
     """The handler while a command runs: the first signal raises :class:`Stopped` (``signum`` keeps it),
-    the later ones are ignored. Inside an import the signal is sent again every :data:`RETRY_S` until
-    the import is over, for at most :data:`IMPORT_WAIT_S`; one that Python swallowed (raised in a
-    callback from C code, a destructor: :meth:`unraisable`) is sent again too. :func:`stop_once` installs it."""
+    the later ones are ignored. Where it cannot be raised safely (:func:`raisable`; ``own``: folders of
+    code that counts as lapwrench's) the signal is sent again every :data:`RETRY_S` until the command is
+    back in its own code, for at most :data:`WAIT_S`; one that Python swallowed all the same (raised in a
+    destructor: :meth:`unraisable`) is sent again too. :func:`stop_once` installs it."""
 
-    def __init__(self) -> None:
+    def __init__(self, own: tuple[str, ...] = (), base: FrameType | None = None) -> None:
+        self.own = own
+        self.base = base  # the frame that runs the command: the stack below it is not looked at
         self.signum: int | None = None
         self.raised = False
         self._until = 0.0
@@ -92,8 +122,8 @@ class StopOnce:
         if self.raised:
             return
         if self.signum is None:
-            self.signum, self._until = signum, time.monotonic() + IMPORT_WAIT_S
-        if importing(frame) and time.monotonic() < self._until:
+            self.signum, self._until = signum, time.monotonic() + WAIT_S
+        if not raisable(frame, self.own, self.base) and time.monotonic() < self._until:
             self._send_again()
             return
         self.raised = True
@@ -109,6 +139,11 @@ class StopOnce:
         self._send_again()
         return True
 
+    def cancel(self) -> None:
+        """No signal sent again any more (the command is over)."""
+        if self._retry is not None:
+            self._retry.cancel()
+
     def _send_again(self) -> None:
         if self._retry is None or not self._retry.is_alive():
             self._retry = threading.Timer(RETRY_S, os.kill, (os.getpid(), self.signum))
@@ -117,11 +152,13 @@ class StopOnce:
 
 
 @contextlib.contextmanager
-def stop_once() -> Iterator[StopOnce]:
-    """Within the block the stop signals raise once (:class:`StopOnce`), and a :class:`Stopped` that Python
-    could not raise is sent again rather than printed; the handlers and ``sys.unraisablehook`` are back
-    after it."""
-    stop = StopOnce()
+def stop_once(own: tuple[str, ...] = ()) -> Iterator[StopOnce]:
+    """Within the block the stop signals raise once (:class:`StopOnce`, with ``own``; the caller's frame is
+    its ``base``), and a :class:`Stopped` that Python could not raise is sent again rather than printed; the
+    handlers and ``sys.unraisablehook`` are back after it."""
+    here = inspect.currentframe()  # this generator's, resumed by contextlib's __enter__, called by the caller
+    caller = here.f_back.f_back if here is not None and here.f_back is not None else None
+    stop = StopOnce(own, caller)
     previous = handle_stop_signals(stop)
     hook = sys.unraisablehook
 
@@ -133,6 +170,7 @@ def stop_once() -> Iterator[StopOnce]:
     try:
         yield stop
     finally:
+        stop.cancel()
         sys.unraisablehook = hook
         restore(previous)
 
