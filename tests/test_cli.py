@@ -4,6 +4,7 @@ never a traceback. Also the argument types of :mod:`lapwrench.cli_types` themsel
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -353,6 +354,37 @@ def test_sigterm_in_a_command_is_one_line_and_exit_143(
         raise NotHandledError
 
     monkeypatch.setattr(hardware_cli, "log_report_main", killed)
+    before = signal.signal(signal.SIGTERM, not_handled)
+    try:
+        assert main(["log-report", "run.mcap"]) == 143
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert capsys.readouterr().err == "lapwrench log-report: stopped by SIGTERM\n"
+
+
+@pytest.mark.parametrize("how", ["swallowed", "still waiting"])
+def test_a_command_that_ends_after_a_stop_signal_never_exits_0(
+    how: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stop whose exception something swallowed on its way (a library's ``except BaseException``), or that
+    still waited for lapwrench's own code when the command returned (this test's code is not lapwrench's):
+    the command ran on to its end, but its exit code and line are the stop's, not 0 (a service manager's
+    SIGTERM must never look like a finished run)."""
+    from lapwrench.hardware import cli as hardware_cli
+
+    def signalled(*_args: object) -> int:
+        if how == "swallowed":
+            with contextlib.suppress(BaseException):
+                signal.raise_signal(signal.SIGTERM)
+                time.sleep(30)  # the signal stops it here
+        else:
+            signal.raise_signal(signal.SIGTERM)  # taken here, where it cannot be raised: it waits
+        return 0
+
+    def not_handled(*_args: object) -> None:
+        raise NotHandledError
+
+    monkeypatch.setattr(hardware_cli, "log_report_main", signalled)
     before = signal.signal(signal.SIGTERM, not_handled)
     try:
         assert main(["log-report", "run.mcap"]) == 143

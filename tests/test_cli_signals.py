@@ -21,7 +21,6 @@ from lapwrench.cli_signals import (
     StopOnce,
     Stopped,
     handle_stop_signals,
-    importing,
     raisable,
     restore,
     signal_of,
@@ -90,10 +89,6 @@ def test_a_signal_the_shell_left_ignored_stays_ignored_and_restore_puts_back_the
     assert isinstance(signal.getsignal(signal.SIGINT), StopOnce)
     restore(previous)
     assert signal.getsignal(signal.SIGINT) is before_int
-
-
-def test_importing_sees_the_import_machinery_on_the_stack() -> None:
-    assert not importing(inspect.currentframe())
 
 
 def test_only_lapwrench_s_own_code_is_raisable() -> None:

@@ -326,15 +326,21 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         with stop_once() as stop:
             try:
-                return _run(args)
+                code = _run(args)
             except Exception:
                 if stop.signum is None:
                     raise
-                # an error on the way out after a stop signal (a clean-up that met what the signal cut short)
+                code = -1  # an error on the way out after a stop signal (a clean-up met what it cut short)
+            finally:
+                stop.cancel()  # the command is over: a signal from now on is only noted
+                stopped = stop.signum is not None
+            if stop.signum is not None and code != 128 + stop.signum:
+                # the stop's exception swallowed on its way (a library's `except BaseException`), or the
+                # signal still waiting for lapwrench's own code when the command ended, or come after it:
+                # its line and code, never the exit code of a command that ran to its end
                 print(stop_line(args.command, stop.signum), file=sys.stderr)
                 return 128 + stop.signum
-            finally:
-                stopped = stop.signum is not None
+            return code
     finally:
         restore(previous)
         if stopped and _started_as_lapwrench():  # its line is out: a signal while Python exits ends it, unsaid

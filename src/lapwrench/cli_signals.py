@@ -13,9 +13,17 @@ one line on stderr (``lapwrench <command>: interrupted``, or ``... stopped by SI
   (:func:`raisable`): a signal that comes inside an import waits for its end (a module cut halfway cannot
   be imported again: the clean-up's next import of it would fail with a traceback), and one that comes
   in a library's code (numba's dispatch, matplotlib, a callback from C code) waits until the library
-  returns (raised there, it was dropped, or left memory corrupt: a crash).
+  returns (raised there, it was dropped, or left memory corrupt: a crash). It waits at most
+  :data:`WAIT_S`: a fresh clone's first run compiles numba's kernels for longer than that (3 s into
+  ``virtual`` with an empty cache, the signal met only numba's compiler for 5 s), and then it is raised
+  where it is, as Python's own Ctrl-C would be;
+* whatever became of the exception (swallowed on its way, still waiting when the command returned, or
+  the signal came after it), :func:`lapwrench.cli.main` ends with the signal's line and code when
+  :class:`StopOnce` noted one: never the exit code of a command that ran to its end.
 
-A signal the shell left ignored (``nohup``, a background job of a script) stays ignored. ``run``,
+Python runs a handler in the main thread, between two bytecodes: a signal that comes in compiled code (a
+numba kernel, a MuJoCo or Pinocchio call) or while another thread runs is taken when the main thread is
+next in Python code. A signal the shell left ignored (``nohup``, a background job of a script) stays ignored. ``run``,
 ``demo`` and ``ui`` install a stop of their own over these while they run.
 """
 
@@ -75,15 +83,6 @@ def exit_quietly(signum: int, _frame: FrameType | None) -> None:
     os._exit(128 + signum)
 
 
-def importing(frame: FrameType | None) -> bool:
-    """Whether ``frame`` runs inside an import (the import machinery is on its stack)."""
-    while frame is not None:
-        if frame.f_code.co_filename.startswith("<frozen importlib._bootstrap"):
-            return True
-        frame = frame.f_back
-    return False
-
-
 def raisable(frame: FrameType | None, own: tuple[str, ...] = (), base: FrameType | None = None) -> bool:
     """Whether an exception may be raised in ``frame``: every frame of its stack above ``base`` (the frame
     that runs the command; None: the whole stack) is lapwrench's, the standard library's (not the packages
@@ -114,15 +113,16 @@ class StopOnce:
         self.own = own
         self.base = base  # the frame that runs the command: the stack below it is not looked at
         self.signum: int | None = None
-        self.raised = False
+        self.raised = False  # raised already, or the command is over: a signal is only noted
+        self.over = False  # the command is over (:meth:`cancel`)
         self._until = 0.0
         self._retry: threading.Timer | None = None
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
-        if self.raised:
-            return
         if self.signum is None:
             self.signum, self._until = signum, time.monotonic() + WAIT_S
+        if self.raised:  # raised already, or the command is over (:meth:`cancel`): only noted
+            return
         if not raisable(frame, self.own, self.base) and time.monotonic() < self._until:
             self._send_again()
             return
@@ -135,12 +135,15 @@ class StopOnce:
         traceback, then dropped), is this handler's :class:`Stopped`: then the signal is sent again."""
         if not isinstance(exc, Stopped) or self.signum is None:
             return False
-        self.raised = False
-        self._send_again()
+        if not self.over:  # after the command nothing is raised: its caller reports the signal noted
+            self.raised = False
+            self._send_again()
         return True
 
     def cancel(self) -> None:
-        """No signal sent again any more (the command is over)."""
+        """The command is over: no signal sent again or raised any more; a first one is still noted
+        (``signum``: the caller ends with its line and code, not with the finished command's)."""
+        self.raised = self.over = True
         if self._retry is not None:
             self._retry.cancel()
 
