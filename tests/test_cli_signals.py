@@ -3,6 +3,8 @@ that raises once, and a signal that comes inside an import waiting for its end."
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import importlib
 import inspect
 import os
@@ -13,6 +15,7 @@ import textwrap
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -142,6 +145,28 @@ def test_a_stop_python_could_not_raise_is_not_printed_but_sent_again(
         time.sleep(10)  # the command goes on: the signal, sent again, stops it here
     assert info.value.signum == signal.SIGTERM and stop.signum == signal.SIGTERM
     assert "Traceback" not in capsys.readouterr().err and sys.unraisablehook is hook
+
+
+def test_a_stop_in_a_callback_from_c_code_is_sent_again_not_printed(
+    capsys: pytest.CaptureFixture[str], kept_handlers: None
+) -> None:
+    """The CI failure of 3828080: llvmlite calls back into Python (its object cache) while numba compiles a
+    fresh clone's kernels; a SIGTERM raised there was printed ('Exception ignored on calling ctypes callback
+    function' and a traceback) and dropped, and ``virtual`` ran on to exit 0. Here C's qsort calls back into
+    this file's code (lapwrench's own for the test), which gets the signal."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    compare_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int))
+
+    def compare(a: Any, b: Any) -> int:
+        signal.raise_signal(signal.SIGTERM)  # taken here, in a callback from C code
+        return int(a[0] - b[0])
+
+    values = (ctypes.c_int * 2)(2, 1)
+    with pytest.raises(Stopped) as info, stop_once(OWN):
+        libc.qsort(values, 2, ctypes.sizeof(ctypes.c_int), compare_t(compare))
+        time.sleep(30)  # the command goes on: the signal, sent again, stops it here
+    assert info.value.signum == signal.SIGTERM
+    assert capsys.readouterr().err == ""
 
 
 CONSOLE_SCRIPT = str(Path(sys.executable).with_name("lapwrench"))  # what pip installed: `lapwrench ...`
