@@ -106,6 +106,22 @@ def test_only_lapwrench_s_own_code_is_raisable() -> None:
     assert seen == [False]  # numpy's Python code between the callback and the test
 
 
+def test_ray_s_waits_are_raisable_other_libraries_are_not() -> None:
+    """A sweep's main thread waits in ``ray.wait``, which checks the signals once a second and passes a
+    KeyboardInterrupt on: waiting for the command to leave Ray delayed every stop of a sweep by WAIT_S."""
+    here = inspect.currentframe()
+
+    def frame_of(filename: str) -> Any:
+        namespace: dict[str, Any] = {"inspect": inspect}
+        exec(compile("def frame():\n    return inspect.currentframe()\n", filename, "exec"), namespace)
+        return namespace["frame"]()
+
+    site = f"{os.sep}venv{os.sep}lib{os.sep}site-packages{os.sep}"
+    assert raisable(frame_of(f"{site}ray{os.sep}_private{os.sep}worker.py"), OWN, here)
+    assert not raisable(frame_of(f"{site}numba{os.sep}core{os.sep}compiler.py"), OWN, here)
+    assert not raisable(frame_of(f"{site}rayon{os.sep}x.py"), OWN, here)
+
+
 def test_a_signal_inside_an_import_waits_for_its_end(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kept_handlers: None
 ) -> None:

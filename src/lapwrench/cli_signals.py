@@ -83,19 +83,36 @@ def exit_quietly(signum: int, _frame: FrameType | None) -> None:
     os._exit(128 + signum)
 
 
+INTERRUPTIBLE = ("ray",)
+"""Installed packages whose Python code is made for Ctrl-C: raised there, the stop comes out as a
+KeyboardInterrupt. Ray's ``ray.wait`` checks the signals once a second and is where a sweep's or a tune's
+main thread spends its time: waiting for the command to leave it delayed every stop of a sweep by
+:data:`WAIT_S` (a SIGTERM halfway ended it 9.9 s later, after the next job had finished)."""
+
+
+def installed_package(filename: str) -> str | None:
+    """The top-level package of an installed library's file (under site- or dist-packages), else None."""
+    for folder in (f"{os.sep}site-packages{os.sep}", f"{os.sep}dist-packages{os.sep}"):
+        if folder in filename:
+            return filename.split(folder, 1)[1].split(os.sep, 1)[0]
+    return None
+
+
 def raisable(frame: FrameType | None, own: tuple[str, ...] = (), base: FrameType | None = None) -> bool:
     """Whether an exception may be raised in ``frame``: every frame of its stack above ``base`` (the frame
     that runs the command; None: the whole stack) is lapwrench's, the standard library's (not the packages
-    installed beside it) or under one of the folders ``own``, and none is an import's. A library's Python
+    installed beside it, but :data:`INTERRUPTIBLE`'s) or under one of the folders ``own``, and none is an
+    import's. A library's Python
     code may run as a callback from C code that does not pass the exception on, or that a call cut halfway
     leaves corrupt: raised in numba's dispatch, a SIGTERM was dropped (the command ran on and ended with 0)
     or the next Pinocchio call crashed (SIGSEGV); a module cut halfway cannot be imported again."""
     ours = (PACKAGE_DIR, *own)
     while frame is not None and frame is not base:
         name = frame.f_code.co_filename
-        installed = f"{os.sep}site-packages{os.sep}" in name or f"{os.sep}dist-packages{os.sep}" in name
+        package = installed_package(name)
         if name.startswith("<frozen importlib._bootstrap") or not (
-            name.startswith(("<", *ours)) or (name.startswith(STDLIB_DIR) and not installed)
+            name.startswith(("<", *ours)) or (name.startswith(STDLIB_DIR) and package is None)
+            or package in INTERRUPTIBLE
         ):
             return False
         frame = frame.f_back
