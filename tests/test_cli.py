@@ -4,9 +4,12 @@ never a traceback. Also the argument types of :mod:`lapwrench.cli_types` themsel
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -52,6 +55,7 @@ BAD_ARGUMENTS: list[list[str]] = [
     ["virtual", "--duration", "nan"],
     ["virtual", "--duration", "inf"],
     ["virtual", "--duration", "1e9"],
+    ["virtual", "--duration", "3600"],  # every tick kept: 17 GB
     ["virtual", "--duration", "0.0001"],  # no tick at all
     ["virtual", "--duration", "ten"],
     ["virtual", "--out", "afile/sub"],
@@ -329,6 +333,120 @@ def test_ctrl_c_in_a_command_is_one_line_and_exit_130(
     assert main(command) == 130
     err = capsys.readouterr().err
     assert err == f"lapwrench {command[0]}: interrupted\n"
+
+
+class NotHandledError(Exception):
+    """What the test's own SIGTERM handler raises: main() left the signal to it (it would end the tests)."""
+
+
+def test_sigterm_in_a_command_is_one_line_and_exit_143(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """SIGTERM (``kill``, a service manager) ends a command as Ctrl-C does, with its own number."""
+    from lapwrench.hardware import cli as hardware_cli
+
+    def killed(*_args: object) -> int:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)  # the signal stops it here (within cli_signals.WAIT_S: this code is not lapwrench's)
+        return 0
+
+    def not_handled(*_args: object) -> None:
+        raise NotHandledError
+
+    monkeypatch.setattr(hardware_cli, "log_report_main", killed)
+    before = signal.signal(signal.SIGTERM, not_handled)
+    try:
+        assert main(["log-report", "run.mcap"]) == 143
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert capsys.readouterr().err == "lapwrench log-report: stopped by SIGTERM\n"
+
+
+@pytest.mark.parametrize("how", ["swallowed", "still waiting"])
+def test_a_command_that_ends_after_a_stop_signal_never_exits_0(
+    how: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stop whose exception something swallowed on its way (a library's ``except BaseException``), or that
+    still waited for lapwrench's own code when the command returned (this test's code is not lapwrench's):
+    the command ran on to its end, but its exit code and line are the stop's, not 0 (a service manager's
+    SIGTERM must never look like a finished run)."""
+    from lapwrench.hardware import cli as hardware_cli
+
+    def signalled(*_args: object) -> int:
+        if how == "swallowed":
+            with contextlib.suppress(BaseException):
+                signal.raise_signal(signal.SIGTERM)
+                time.sleep(30)  # the signal stops it here
+        else:
+            signal.raise_signal(signal.SIGTERM)  # taken here, where it cannot be raised: it waits
+        return 0
+
+    def not_handled(*_args: object) -> None:
+        raise NotHandledError
+
+    monkeypatch.setattr(hardware_cli, "log_report_main", signalled)
+    before = signal.signal(signal.SIGTERM, not_handled)
+    try:
+        assert main(["log-report", "run.mcap"]) == 143
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert capsys.readouterr().err == "lapwrench log-report: stopped by SIGTERM\n"
+
+
+def test_an_error_on_the_way_out_after_ctrl_c_is_the_stop_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A clean-up that fails on what the signal cut short (a module cut halfway that it imports again, as
+    pandas did in ``sweep``) still ends with the one line of the stop, not the clean-up's traceback."""
+    from lapwrench.hardware import cli as hardware_cli
+
+    def interrupted(*_args: object) -> int:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(30)
+        except KeyboardInterrupt:
+            raise AttributeError("partially initialized module 'pandas' has no attribute 'x'") from None
+        return 0
+
+    monkeypatch.setattr(hardware_cli, "log_report_main", interrupted)
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)  # whatever the runner left (SIG_IGN)
+    try:
+        assert main(["log-report", "run.mcap"]) == 130
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert capsys.readouterr().err == "lapwrench log-report: interrupted\n"
+
+
+@pytest.mark.parametrize("command", [["virtual", "--duration", "0.5", "--quiet"], ["log-report", "{log}"]])
+def test_a_reader_that_went_away_is_one_line_and_141_not_a_broken_pipe_traceback(
+    command: list[str], tmp_path: Path
+) -> None:
+    """``lapwrench ... | head -1``: the printing after the reader has gone raised BrokenPipeError, a traceback.
+    Now one line on stderr and 128 + SIGPIPE, as a program SIGPIPE ends (here the reader is gone at once)."""
+    from hardware.log.support import write
+
+    log = tmp_path / "run.mcap"
+    write(log, 50)
+    argv = [a.format(log=log) for a in command]
+    proc = subprocess.Popen([sys.executable, "-m", "lapwrench", *argv, "--out", str(tmp_path / "out")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "MUJOCO_GL": "egl"})
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()
+    err = proc.stderr.read()
+    assert proc.wait(timeout=300) == 128 + signal.SIGPIPE, err
+    assert err == f"lapwrench {command[0]}: its output was closed (the reading end of a pipe); stopped\n"
+
+
+def test_a_report_folder_whose_name_is_not_utf8_is_printed_escaped(tmp_path: Path) -> None:
+    """With stdout strict UTF-8 (a UTF-8 locale other than C.UTF-8), ``virtual``'s last line ("wrote ...")
+    ended it with a UnicodeEncodeError traceback, after the report was written."""
+    out = tmp_path / os.fsdecode(b"virtual-\xff")
+    proc = subprocess.run([sys.executable, "-m", "lapwrench", "virtual", "--duration", "0.2", "--quiet", "--out",
+                           str(out)], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONIOENCODING": "utf-8:strict"})
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert proc.stdout.splitlines()[-1].startswith(f"wrote {tmp_path}/virtual-\\xff/virtual_closed_loop.png")
 
 
 def test_a_robot_description_that_cannot_be_used_is_one_line_and_exit_2(

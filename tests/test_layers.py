@@ -71,7 +71,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("sim", ("lapwrench.sim",)),
     ("hardware", ("lapwrench.hardware",)),
     ("study", ("lapwrench.study",)),
-    ("apps", ("lapwrench.cli", "lapwrench.perception.cli", "lapwrench.ui")),
+    ("apps", ("lapwrench.cli", "lapwrench.__main__", "lapwrench.perception.cli", "lapwrench.ui")),
 )
 """Lowest layer first: (layer name, its units). See the module docstring."""
 

@@ -1,32 +1,59 @@
-"""The ``lapwrench`` command line."""
+"""The ``lapwrench`` command line.
+
+Its stop signals (Ctrl-C, SIGTERM, SIGHUP: one line and exit code 128 + the signal's number, from this
+module's first line on) are :mod:`lapwrench.cli_signals`'.
+"""
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import json
-import math
 import os
 import sys
-import time
-from pathlib import Path
 
-import numpy as np
+from lapwrench.cli_signals import exit_at_once, exit_quietly, handle_stop_signals  # light imports: first
 
-from lapwrench import config as config_mod
-from lapwrench.cli_types import (
+
+def _started_as_lapwrench() -> bool:
+    """Whether this process is the ``lapwrench`` program (its console script, ``python -m lapwrench`` or
+    ``python -m lapwrench.cli``), not a program that imports this module (the tests)."""
+    main_module = sys.modules.get("__main__")
+    spec = getattr(main_module, "__spec__", None)
+    if spec is not None:
+        return spec.name in ("lapwrench.__main__", "lapwrench.cli")
+    return os.path.basename(getattr(main_module, "__file__", None) or "") == "lapwrench"
+
+
+if _started_as_lapwrench():  # before the imports below (numpy, ...): a Ctrl-C while they load is one line
+    handle_stop_signals(exit_at_once)
+
+import argparse  # noqa: E402
+import contextlib  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import select  # noqa: E402
+import signal  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from lapwrench import config as config_mod  # noqa: E402
+from lapwrench.cli_signals import restore, signal_of, stop_line, stop_once  # noqa: E402
+from lapwrench.cli_types import (  # noqa: E402
     FOXGLOVE_DEFAULT,
     ArgumentParser,
+    display_path,
     float_in,
     host_port,
     int_in,
     output_dir,
 )
-from lapwrench.plugins import CueError
-from lapwrench.robot.errors import RobotDescriptionError
+from lapwrench.plugins import CueError  # noqa: E402
+from lapwrench.robot.errors import RobotDescriptionError  # noqa: E402
 
 MIN_VIRTUAL_SECONDS = 0.1  # enough ticks for the metrics and the plot
-MAX_VIRTUAL_SECONDS = 3600.0  # the virtual run keeps every tick in memory
+# The virtual run keeps every tick in memory: 4.8 MB a second of robot time (peak RSS 404 MB at 10 s, 645 MB at
+# 60 s, 2026-12-03); 3600 s took 17 GB. 600 s: 3.3 GB.
+MAX_VIRTUAL_SECONDS = 600.0
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits
 
 
@@ -116,7 +143,7 @@ def cmd_virtual(args: argparse.Namespace) -> int:
     plot_virtual(log, cfg, out / "virtual_closed_loop.png")
     (out / "virtual_metrics.json").write_text(json.dumps(metrics, indent=2))
     config_mod.dump(cfg, out / "config.yaml")
-    print(f"wrote {out / 'virtual_closed_loop.png'} and {out / 'virtual_metrics.json'}")
+    print(f"wrote {display_path(out / 'virtual_closed_loop.png')} and {display_path(out / 'virtual_metrics.json')}")
     return 0
 
 
@@ -172,16 +199,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return _demo_interrupted(exc)
     for name, res in results.items():
         print(f"{name}: " + ", ".join(f"{r.label}: RCM max {r.metrics['rcm_error_max_mm']:.2f} mm" for r in res.runs))
-    print(f"report: {Path(args.out) / 'report.md'}")
+    print(f"report: {display_path(Path(args.out) / 'report.md')}")
     return 0
 
 
 def _demo_interrupted(exc: KeyboardInterrupt) -> int:
     """The demo's line for a stop signal (a ``DemoInterrupted`` names it); returns 128 + its number."""
-    code = int(getattr(exc, "exit_code", 130))
-    how = "interrupted" if code == 130 else f"stopped by {getattr(exc, 'name', 'a signal')}"
-    print(f"lapwrench demo: {how}; no report was written", file=sys.stderr)
-    return code
+    signum = signal_of(exc)
+    print(f"{stop_line('demo', signum)}; no report was written", file=sys.stderr)
+    return 128 + signum
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -287,22 +313,78 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse and run one command. Bad arguments and input files end with one line on stderr and exit
-    code 2 (argparse's own errors add a usage line), Ctrl-C with one line and 130; never a traceback."""
+    code 2 (argparse's own errors add a usage line), a stop signal with one line and 128 + its number
+    (130 for Ctrl-C; see the module); never a traceback."""
     # OpenCV's own warnings (a camera index that does not open...) would add lines to our one-line errors
     os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
-    args = build_parser().parse_args(argv)
+    for stream in (sys.stdout, sys.stderr):  # a path's bytes that are not UTF-8 as \udcff, never an error
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            stream.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]
+    previous = handle_stop_signals(exit_at_once)  # parsing: nothing to close yet
+    stopped = False
+    try:
+        args = build_parser().parse_args(argv)
+        with stop_once() as stop:
+            try:
+                code = _run(args)
+            except Exception:
+                if stop.signum is None:
+                    raise
+                code = -1  # an error on the way out after a stop signal (a clean-up met what it cut short)
+            finally:
+                stop.cancel()  # the command is over: a signal from now on is only noted
+                stopped = stop.signum is not None
+            if stop.signum is not None and code != 128 + stop.signum:
+                # the stop's exception swallowed on its way (a library's `except BaseException`), or the
+                # signal still waiting for lapwrench's own code when the command ended, or come after it:
+                # its line and code, never the exit code of a command that ran to its end
+                print(stop_line(args.command, stop.signum), file=sys.stderr)
+                return 128 + stop.signum
+            return code
+    finally:
+        restore(previous)
+        if stopped and _started_as_lapwrench():  # its line is out: a signal while Python exits ends it, unsaid
+            handle_stop_signals(exit_quietly)
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         if args.command == "demo":
-            return cmd_demo(args)
-        if args.command == "virtual":
-            return cmd_virtual(args)
-        return int(args.func(args))
+            code = cmd_demo(args)
+        elif args.command == "virtual":
+            code = cmd_virtual(args)
+        else:
+            code = int(args.func(args))
+        if sys.stdout is not None:
+            sys.stdout.flush()  # here, not at exit: a reader gone (BrokenPipeError) is then one line below
+        return code
     except (UsageError, config_mod.ConfigError, RobotDescriptionError, CueError) as exc:
         print(f"lapwrench {args.command}: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # Ctrl-C in a command without its own handling (log-report, identify-grip...)
-        print(f"lapwrench {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # a stop signal in a command without its own handling (log-report...)
+        signum = signal_of(exc)
+        print(stop_line(args.command, signum), file=sys.stderr)
+        return 128 + signum
+    except BrokenPipeError:
+        if not _stdout_gone():
+            raise
+        # `lapwrench ... | head -1`: the reader has gone, as SIGPIPE would end a C program (128 + 13); stdout
+        # on /dev/null, so that Python's own flush at exit does not fail again with a traceback
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        with contextlib.suppress(OSError):
+            print(f"lapwrench {args.command}: its output was closed (the reading end of a pipe); stopped",
+                  file=sys.stderr)
+        return 128 + signal.SIGPIPE
+
+
+def _stdout_gone() -> bool:
+    """Whether stdout is a pipe whose reading end is closed (a BrokenPipeError is then about it)."""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # no stdout, or not a file
+        return False
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from lapwrench.sim.results import DEFAULT_OPTIONS, ScenarioOptions, ScenarioResu
 from lapwrench.sim.scenarios import grip, rcm_disturbance
 from lapwrench.sim.scene.config import SceneConfig
 from lapwrench.sim.surgeon import HandGuide, HousingDisturbance, SpeedDrivenHand
-from lapwrench.sim.variation import DETECTION_LATENCY, CorruptedDetector, WorldVariation
+from lapwrench.sim.variation import DETECTION_LATENCY, RANGES, CorruptedDetector, WorldVariation
 from lapwrench.sim.world import CONTROL_DT
 
 CFG = load()
@@ -37,24 +37,47 @@ def test_defaults_are_todays_world() -> None:
 @pytest.mark.parametrize(
     ("field", "value", "words"),
     [
-        ("trocar_stiffness", math.nan, "world.trocar_stiffness must be a positive finite number, got nan"),
-        ("surgeon_force", 0.0, "world.surgeon_force must be a positive finite number"),
-        ("surgeon_grip", -1.0, "world.surgeon_grip must be a positive finite number"),
-        ("surgeon_speed", math.inf, "world.surgeon_speed must be a positive finite number"),
-        ("incision_shift_mm", -2.0, "world.incision_shift_mm must be a finite number >= 0"),
-        ("detector_latency_s", math.nan, "world.detector_latency_s must be a finite number >= 0"),
-        ("detector_noise_px", -0.5, "world.detector_noise_px must be a finite number >= 0"),
-        ("detector_dropout", 1.0, "world.detector_dropout must lie in [0, 1), got 1.0"),
-        ("detector_dropout", -0.1, "world.detector_dropout must lie in [0, 1)"),
-        ("surgeon_force", "2", "world.surgeon_force must be a number, got '2'"),
-        ("surgeon_force", True, "world.surgeon_force must be a number, got True"),
-        ("detector_noise_px", None, "world.detector_noise_px must be a number, got None"),
+        ("trocar_stiffness", math.nan, "world.trocar_stiffness must be a number from 0.1 to 10 (a scale on the wall's"
+                                       " 1 N/mm at the incision: 0.1-10 N/mm), got nan"),
+        ("surgeon_force", 0.0, "world.surgeon_force must be a number from 0.1 to 5"),
+        ("surgeon_grip", -1.0, "world.surgeon_grip must be a number from 0.1 to 5"),
+        ("surgeon_speed", math.inf, "world.surgeon_speed must be a number from 0.1 to 5"),
+        ("incision_shift_mm", -2.0, "world.incision_shift_mm must be a number from 0 to 30"),
+        ("detector_latency_s", math.nan, "world.detector_latency_s must be a number from 0 to 1"),
+        ("detector_noise_px", -0.5, "world.detector_noise_px must be a number from 0 to 100"),
+        ("detector_dropout", 1.0, "world.detector_dropout must be a number from 0 to 1 (a probability, 1 (no"
+                                  " detection ever) excluded), got 1.0"),
+        ("detector_dropout", -0.1, "world.detector_dropout must be a number from 0 to 1"),
+        ("surgeon_force", "2", "world.surgeon_force must be a number from 0.1 to 5 (a scale on the scripted pushes of"
+                               " up to 30 N: up to 150 N), got '2'"),
+        ("surgeon_force", True, "got True"),
+        ("detector_noise_px", None, "world.detector_noise_px must be a number from 0 to 100 (σ of the point noise on a"
+                                    " 640 x 480 image), got None"),
+        # beyond any physical world: refused, not simulated (a push of 1e300 N, an integer beyond any float)
+        ("surgeon_force", 1e300, "world.surgeon_force must be a number from 0.1 to 5 (a scale on the scripted pushes"
+                                 " of up to 30 N: up to 150 N), got 1e+300"),
+        ("surgeon_speed", 5.01, "world.surgeon_speed must be a number from 0.1 to 5"),
+        ("surgeon_grip", 1e-300, "world.surgeon_grip must be a number from 0.1 to 5"),
+        ("trocar_stiffness", 10**400, "got an integer of 401 digits"),
+        ("incision_shift_mm", 30.5, "world.incision_shift_mm must be a number from 0 to 30"),
+        ("detector_latency_s", 3600, "world.detector_latency_s must be a number from 0 to 1"),
+        ("detector_noise_px", 1e9, "world.detector_noise_px must be a number from 0 to 100"),
     ],
 )
 def test_bad_values_raise_one_line_naming_the_field(field: str, value: object, words: str) -> None:
     with pytest.raises(ValueError, match=r"^[^\n]+$") as err:
         WorldVariation.from_dict({field: value})
     assert words in str(err.value)
+
+
+def test_every_range_holds_the_default_and_its_own_ends() -> None:
+    """The ranges are inclusive (but for dropout's 1) and hold today's world; each has its reason."""
+    for name, (lo, hi, why) in RANGES.items():
+        assert lo <= getattr(WorldVariation(), name) <= hi and why
+        WorldVariation.from_dict({name: lo})
+        if name != "detector_dropout":
+            WorldVariation.from_dict({name: hi})
+    assert set(RANGES) == set(WorldVariation.FIELDS)
 
 
 def test_from_dict_refuses_unknown_keys_and_lists_the_known_ones() -> None:

@@ -95,8 +95,8 @@ def test_sweep_help_names_the_save_interval_and_its_default(capsys: pytest.Captu
 
 @pytest.mark.slow
 def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
-    """SIGTERM in the middle: exit 130, a readable table with the finished jobs; the same command again
-    runs only the rest and writes the report."""
+    """SIGTERM in the middle: exit 143 (128 + 15, as every command), a readable table with the finished jobs;
+    the same command again runs only the rest and writes the report."""
     # one worker and two jobs in this order: grip (three short runs) and rcm-disturbance (two runs of 6 s
     # simulated, several seconds). The table is saved as soon as a job finishes (--save-every 0.1), so it
     # appears after grip, while rcm-disturbance runs: the kill lands halfway, not during Ray's shutdown
@@ -115,8 +115,8 @@ def test_sweep_killed_halfway_keeps_rows_and_resumes(tmp_path: Path) -> None:
     assert table.exists(), proc.communicate()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
-    assert "interrupted" in err and "Traceback" not in err
+    assert proc.returncode == 143, err
+    assert "lapwrench sweep: stopped by SIGTERM; the finished runs are saved in" in err and "Traceback" not in err
     first = pd.read_parquet(table)
     done = first.run_id.nunique()
     assert done == 1
@@ -146,6 +146,8 @@ def test_tiny_tuning_run_writes_a_preset_that_loads_and_passes(tmp_path: Path) -
                            "--workers", "2", "--quiet"], capture_output=True, text=True, timeout=900,
                           env={**os.environ, "MUJOCO_GL": "egl"})
     assert proc.returncode == 0, proc.stderr[-2000:]
+    # --quiet: our three lines only (Ray Tune's new output printed its tables even at verbose 0)
+    assert [line.split(":")[0] for line in proc.stdout.splitlines()] == ["lapwrench tune", "best", "report"]
     assert "2 of 2 trials met every constraint" in proc.stdout
     assert "check passed" in proc.stdout
     from lapwrench import config as config_mod
@@ -185,7 +187,7 @@ def test_tune_interrupted_exits_130_and_writes_no_result(tmp_path: Path) -> None
 
 @pytest.fixture
 def kept_signals() -> Iterator[None]:
-    """The sweep and tune commands turn SIGTERM and SIGHUP into KeyboardInterrupt: undone after the test."""
+    """The stop signals' handlers as they were, after the test (lapwrench.cli's main puts them back too)."""
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     yield
     for sig, handler in handlers.items():
@@ -221,6 +223,70 @@ def test_an_interrupt_before_any_run_finished_says_nothing_was_saved(
     assert capsys.readouterr().err == (f"lapwrench sweep: interrupted; the finished runs are saved in {saved}; run the "
                                        "same command again to resume\n")
     assert len(pd.read_parquet(saved)) == 1
+
+
+def test_rows_of_runs_an_edited_study_no_longer_has_are_kept_marked_and_left_out_of_the_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], kept_signals: None
+) -> None:
+    """The study's grid was edited between two sweeps into one folder: the rows of the old grid's runs used to
+    stay in the table and in the report, mixed with the new grid's. Now they are kept (in_study false) and
+    left out of the report, and the sweep says so; undoing the edit brings them back without a run."""
+    out = tmp_path / "out"
+    old = _write(tmp_path / "old.yaml", {**STUDY, "grid": {"viscous.k_t": [120.0, 150.0]}})
+    new = _write(tmp_path / "new.yaml", {**STUDY, "grid": {"viscous.k_t": [150.0, 180.0]}})
+    out.mkdir()
+    table = ResultTable(out)
+    for study in (old, new):  # every job of both grids already in the table: no Ray
+        table.add([r for job in expand(load_study(study)) for r in job_rows(job, "cli", None, "RuntimeError: x", 1.0)
+                   if r["run_id"] not in table.done])
+    table.save()
+    assert main(["sweep", str(new), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert ("lapwrench sweep: 1 rows of runs this study no longer has (its grid, seeds or scenarios changed) are kept "
+            "in the table with in_study = false and left out of this report.") in printed
+    rows = pd.read_parquet(out / "runs.parquet")
+    assert len(rows) == 3 and rows.groupby("in_study")["p.viscous.k_t"].apply(sorted).to_dict() == {
+        False: [120.0], True: [150.0, 180.0]}
+    report = (out / "report.md").read_text()
+    assert "**Jobs:** 2 " in report and "in_study = false" in report
+    assert main(["sweep", str(old), "--out", str(out), "--quiet"]) == 0  # the edit undone: nothing runs
+    assert "ran 0 jobs (0 failed) and skipped 2" in capsys.readouterr().out
+    rows = pd.read_parquet(out / "runs.parquet")
+    assert sorted(rows[rows.in_study]["p.viscous.k_t"]) == [120.0, 150.0] and len(rows) == 3
+
+
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+def test_more_workers_than_this_machine_has_cpus_is_refused_before_ray_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    """``--workers 256`` on two cores started 256 simulations at once, each with its memory, taking turns."""
+    from lapwrench.study.runner import available_cpus
+
+    data = STUDY if command == "sweep" else {**STUDY, "search": {"viscous.k_t": {"uniform": [120.0, 180.0]}},
+                                             "objective": {"metric": "duration_s"}}
+    study = _write(tmp_path / "study.yaml", data)
+    cpus = available_cpus()
+    assert main([command, str(study), "--out", str(tmp_path / "out"), "--workers", str(cpus + 1), "--quiet"]) == 2
+    assert capsys.readouterr().err == (
+        f"lapwrench {command}: --workers {cpus + 1}: this process may use {cpus} CPUs; more workers would only take "
+        "turns on them, each holding a simulation in memory (--address runs on a cluster)\n")
+
+
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+def test_a_pipe_in_the_results_folder_is_refused_before_ray_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: str
+) -> None:
+    """A FIFO named runs.parquet (or trials.parquet, report.md...) in --out: the table's read, or a write,
+    waited for another program forever (the sweep hung until killed)."""
+    data = STUDY if command == "sweep" else {**STUDY, "search": {"viscous.k_t": {"uniform": [120.0, 180.0]}},
+                                             "objective": {"metric": "duration_s"}}
+    study = _write(tmp_path / "study.yaml", data)
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mkfifo(out / ("runs.parquet" if command == "sweep" else "trials.parquet"))
+    assert main([command, str(study), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"lapwrench {command}: --out {out} holds ") and "a pipe, socket or device" in err, err
 
 
 def test_a_report_that_cannot_be_written_is_one_line_and_keeps_the_runs(

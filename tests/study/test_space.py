@@ -247,6 +247,21 @@ def test_apply_refusals_name_the_key(params: dict, named: str) -> None:
         apply(BASE, params)
 
 
+@pytest.mark.parametrize(("key", "dist"), [
+    ("world.surgeon_force", {"uniform": [0.5, 1e300]}),
+    ("world.trocar_stiffness", {"loguniform": [1e-300, 2.0]}),
+    ("world.detector_latency_s", {"normal": [0.04, 0.01], "min": 0.0, "max": 1e6}),
+])
+def test_a_world_draw_beyond_its_physical_range_is_refused_naming_the_key_and_the_range(key: str, dist: dict) -> None:
+    """A sweep's random world value is checked at its corners against the field's range, before anything runs."""
+    from lapwrench.sim.variation import RANGES
+
+    lo, hi, _ = RANGES[key.removeprefix("world.")]
+    with pytest.raises(SpaceError, match=r"^[^\n]+$") as info:
+        check_dist(BASE, key, parse_dist(key, dist))
+    assert f"{key} must be a number from {lo:g} to {hi:g}" in str(info.value)
+
+
 # --------------------------------------------------------------------------- check_key
 
 

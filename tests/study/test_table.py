@@ -176,3 +176,19 @@ def test_a_folder_name_that_is_not_utf8_holds_the_table(tmp_path: Path) -> None:
     table.save()
     again = ResultTable(out)
     assert again.done == {"a", "b"} and again.failed_ids() == {"b"}
+
+
+def test_rows_of_runs_outside_the_study_are_kept_marked_and_left_out_of_the_frame(tmp_path: Path) -> None:
+    """A study edited between two sweeps: its old runs' rows stay in the file (in_study false), not in the frame
+    the report is drawn from; marking them again as they were changes nothing."""
+    table = ResultTable(tmp_path)
+    table.add([{"run_id": "a", "status": "ok"}, {"run_id": "b", "status": "failed"}])
+    table.save()
+    edited = ResultTable(tmp_path)
+    assert edited.mark_study({"a", "c"}) == 1
+    edited.save()
+    again = ResultTable(tmp_path)
+    assert list(again.frame().run_id) == ["a"] and list(again.frame(everything=True).in_study) == [True, False]
+    assert again.done == {"a", "b"}  # a finished run is never run again, even outside the study
+    assert again.mark_study({"a", "c"}) == 1 and not again.dirty
+    assert again.mark_study({"a", "b"}) == 0 and len(again.frame()) == 2

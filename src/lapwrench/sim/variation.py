@@ -31,13 +31,25 @@ H = TypeVar("H")
 # (sharing the CPU with physics and rendering); the rest stands for exposure, transfer, scheduling.
 DETECTION_LATENCY = 0.04
 
-_SCALES = ("surgeon_force", "surgeon_speed", "surgeon_grip", "trocar_stiffness")  # positive factors
-_AT_LEAST_ZERO = ("incision_shift_mm", "detector_latency_s", "detector_noise_px")
+RANGES: dict[str, tuple[float, float, str]] = {
+    "surgeon_force": (0.1, 5.0, "a scale on the scripted pushes of up to 30 N: up to 150 N"),
+    "surgeon_speed": (0.1, 5.0, "a scale on how fast the hand moves the scope (up to 1 rad/s) and builds its push"),
+    "surgeon_grip": (0.1, 5.0, "a scale on the grip forces of 5, 17 and 30 N: 0.5-150 N"),
+    "trocar_stiffness": (0.1, 10.0, "a scale on the wall's 1 N/mm at the incision: 0.1-10 N/mm"),
+    "incision_shift_mm": (0.0, 30.0, "Fig. 5's housing shift, 10 mm; 30 mm pulls 30 N on the default wall"),
+    "detector_latency_s": (0.0, 1.0, "one frame, 0.04 s, by default; a second is 25 frames behind"),
+    "detector_dropout": (0.0, 1.0, "a probability, 1 (no detection ever) excluded"),
+    "detector_noise_px": (0.0, 100.0, "σ of the point noise on a 640 x 480 image"),
+}
+"""Each field's allowed values, ``(lowest, highest, why)``: wide enough for any surgeon, wall and camera a
+study might ask about, narrow enough that a run still describes one (a push of 10^300 N, or a wall
+stiffness of 0, stops a simulation without saying anything). ``detector_dropout`` excludes its highest."""
 
 
 @dataclass(frozen=True)
 class WorldVariation:
-    """How the simulated world differs from the default one (issue 14's world variations).
+    """How the simulated world differs from the default one (issue 14's world variations). Every field
+    has a range (:data:`RANGES`); a value outside it is a one-line ValueError naming the field.
 
     Attributes:
         surgeon_force: scale on every scripted hand's push (``HandGuide.max_force``,
@@ -70,15 +82,16 @@ class WorldVariation:
         variations compare, hash and serialise equal whether given as int or float."""
         for name in self.FIELDS:
             value = getattr(self, name)
+            lo, hi, why = RANGES[name]
+            allowed = f"world.{name} must be a number from {lo:g} to {hi:g}"
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ValueError(f"world.{name} must be a number, got {value!r}")
-            value = float(value)
-            if name in _SCALES and not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"world.{name} must be a positive finite number, got {value!r}")
-            if name in _AT_LEAST_ZERO and not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"world.{name} must be a finite number >= 0, got {value!r}")
-            if name == "detector_dropout" and not (0.0 <= value < 1.0):
-                raise ValueError(f"world.{name} must lie in [0, 1), got {value!r}")
+                raise ValueError(f"{allowed} ({why}), got {repr(value)[:40]}")
+            try:
+                value = float(value)
+            except OverflowError:  # an int beyond any float
+                raise ValueError(f"{allowed} ({why}), got an integer of {len(str(abs(value)))} digits") from None
+            if not (lo <= value <= hi) or (name == "detector_dropout" and value == hi):  # NaN fails the test
+                raise ValueError(f"{allowed} ({why}), got {value!r}")
             object.__setattr__(self, name, value)
 
     @classmethod

@@ -1,9 +1,11 @@
 """The ``lapwrench sweep`` and ``lapwrench tune`` commands.
 
 A bad argument or study file ends with one line ``lapwrench sweep: ...`` on stderr and exit code 2,
-before Ray starts. Ctrl-C, SIGTERM and SIGHUP stop a sweep after saving every finished row (exit 130,
-one line saying where they are, or that none had finished); running it again resumes. A report that
-cannot be written (the disk filled) is one line and exit code 1, the runs kept.
+before Ray starts. Ctrl-C, SIGTERM and SIGHUP stop a sweep after saving every finished row (exit code
+128 + the signal's number: 130, 143, 129; one line saying where they are, or that none had finished);
+running it again resumes. The signals are :mod:`lapwrench.cli_signals`' (a second one is ignored while the
+rows are saved and Ray stops; one the shell left ignored, as ``nohup`` does SIGHUP, stays ignored). A report
+that cannot be written (the disk filled) is one line and exit code 1, the runs kept.
 """
 
 from __future__ import annotations
@@ -11,11 +13,11 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import signal
 import sys
 from pathlib import Path
 from typing import Any
 
+from lapwrench.cli_signals import signal_of, stop_line
 from lapwrench.cli_types import display_path, int_in, output_dir, positive_float
 from lapwrench.config_yaml import cut, short
 
@@ -40,7 +42,7 @@ def add_parsers(sub: Any) -> None:
     for p in (sw, tu):
         p.add_argument("--address", default=None, help=ADDRESS_HELP)
         p.add_argument("--workers", type=int_in(1, 256), default=None,
-                       help="CPUs of the embedded Ray, 1 to 256 (default: all of this machine's)")
+                       help="CPUs of the embedded Ray, at most this machine's (default: all of them)")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
     sw.set_defaults(func=sweep_main)
     tu.set_defaults(func=tune_main)
@@ -63,6 +65,11 @@ def _prepare(args: argparse.Namespace, command: str) -> None:
 
     if args.address is not None and args.workers is not None:
         raise StudyUsageError("--workers sizes the embedded Ray; a cluster at --address has its own CPUs")
+    from lapwrench.study.runner import available_cpus
+
+    if args.workers is not None and args.workers > (cpus := available_cpus()):
+        raise StudyUsageError(f"--workers {args.workers}: this process may use {cpus} CPUs; more workers would only "
+                              "take turns on them, each holding a simulation in memory (--address runs on a cluster)")
     if args.address is not None:  # its form, before anything is installed (reachability: when Ray starts)
         from lapwrench.study.runner import ClusterError, parse_address
 
@@ -76,24 +83,19 @@ def _prepare(args: argparse.Namespace, command: str) -> None:
         raise StudyUsageError(str(exc)) from exc
 
 
-def _stop_on_signals() -> None:
-    """SIGTERM and SIGHUP end the run like Ctrl-C (finished rows saved); Ctrl-C also when the shell
-    left SIGINT ignored."""
-    def interrupt(*_: object) -> None:
-        raise KeyboardInterrupt
-
-    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, interrupt)
-
-
 def _out(args: argparse.Namespace, kind: str, name: str) -> Path:
     from lapwrench.config import ensure_writable_dir
 
     out = Path(args.out) if args.out else Path("reports") / kind / name
     try:
-        return ensure_writable_dir(out)
+        ensure_writable_dir(out)
+        special = next((p for p in out.iterdir() if p.exists() and not (p.is_file() or p.is_dir())), None)
     except OSError as exc:
         raise StudyUsageError(f"--out {cut(str(out), 100)} is not writable: {exc.strerror or exc}") from exc
+    if special is not None:  # reading or writing a FIFO there waits for another program, forever
+        raise StudyUsageError(f"--out {cut(str(out), 100)} holds {cut(display_path(special.name), 60)}, a pipe, socket "
+                              "or device: a results folder holds files; move it away or choose another --out")
+    return out
 
 
 def _same_study(out: Path, name: str) -> None:
@@ -117,7 +119,7 @@ def _same_study(out: Path, name: str) -> None:
 
 def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
     """The validated study (``sweep``) or tuning file (``tune``) and its results folder; the study extra
-    installed if missing; SIGTERM/SIGHUP turned into KeyboardInterrupt. StudyUsageError on a bad input."""
+    installed if missing. StudyUsageError on a bad input."""
     from lapwrench.study.spec import StudyError, load_study
     from lapwrench.study.tune_spec import load_tune
 
@@ -130,8 +132,13 @@ def _start(args: argparse.Namespace, command: str) -> tuple[Any, Path]:
     out = _out(args, "sweeps" if command == "sweep" else "tune", spec.name)
     if command == "sweep":
         _same_study(out, spec.name)
-    _stop_on_signals()
     return spec, out
+
+
+def _stopped(command: str, exc: KeyboardInterrupt) -> tuple[str, int]:
+    """The start of the line for a stop signal (``lapwrench sweep: stopped by SIGTERM``) and the exit code."""
+    signum = signal_of(exc)
+    return stop_line(command, signum), 128 + signum
 
 
 def _saved(out: Path | None) -> str:
@@ -145,8 +152,8 @@ def _saved(out: Path | None) -> str:
 
 
 def sweep_main(args: argparse.Namespace) -> int:
-    """Run a study; exit 0 when every job ran (failed runs included, as rows), 130 when interrupted,
-    1 when the runs are saved but the report (or the study's copy) cannot be written."""
+    """Run a study; exit 0 when every job ran (failed runs included, as rows), 128 + n for a stop signal
+    (130: Ctrl-C), 1 when the runs are saved but the report (or the study's copy) cannot be written."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     out: Path | None = None
     try:
@@ -164,13 +171,17 @@ def sweep_main(args: argparse.Namespace) -> int:
     except StudyUsageError as exc:
         print(f"lapwrench sweep: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"lapwrench sweep: interrupted; {_saved(out)}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        line, code = _stopped("sweep", exc)
+        print(f"{line}; {_saved(out)}", file=sys.stderr)
+        return code
     from lapwrench.study.report import write_report
 
     notes = [f"This sweep ran {outcome.ran} jobs ({outcome.failed} failed) and skipped {outcome.skipped} already in "
              f"the table, in {outcome.wall_s:.0f} s on {len(outcome.nodes - {'lost'}) or 0} node(s)."]
+    if outcome.outside:  # the study file was edited since the last sweep into this folder
+        notes.append(f"{outcome.outside} rows of runs this study no longer has (its grid, seeds or scenarios changed) "
+                     "are kept in the table with in_study = false and left out of this report.")
     try:
         if Path(args.study).resolve() != (out / "study.yaml").resolve():
             shutil.copyfile(args.study, out / "study.yaml")
@@ -180,14 +191,15 @@ def sweep_main(args: argparse.Namespace) -> int:
               f"written: {exc.strerror or exc}{'' if exc.filename is None else f' ({cut(str(exc.filename), 200)})'}",
               file=sys.stderr)
         return 1
-    print(f"lapwrench sweep: {notes[0]}")
+    for note in notes:
+        print(f"lapwrench sweep: {note}")
     print(f"results: {table.path}\nreport: {report}")
     return 0
 
 
 def tune_main(args: argparse.Namespace) -> int:
     """Search gains; exit 0 with best.yaml written, 1 when no trial met every constraint (or the results
-    cannot be written), 130 when interrupted."""
+    cannot be written), 128 + n for a stop signal (130: Ctrl-C)."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     out: Path | None = None
     try:
@@ -202,19 +214,21 @@ def tune_main(args: argparse.Namespace) -> int:
     except StudyUsageError as exc:
         print(f"lapwrench tune: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("lapwrench tune: interrupted; no configuration was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        line, code = _stopped("tune", exc)
+        print(f"{line}; no configuration was written", file=sys.stderr)
+        return code
     except OSError as exc:  # trials.parquet or best.yaml: a full disk, a folder made read-only
         print(f"lapwrench tune: cannot write the results in {cut(str(out or args.out), 200)}: {exc.strerror or exc}",
               file=sys.stderr)
         return 1
     try:
         return _finish_tune(spec, out, outcome)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
+        line, code = _stopped("tune", exc)
         unchecked = "best.yaml is written but not checked; " if outcome.best_config is not None else ""
-        print(f"lapwrench tune: interrupted after the search; {unchecked}no report was written", file=sys.stderr)
-        return 130
+        print(f"{line} after the search; {unchecked}no report was written", file=sys.stderr)
+        return code
     except OSError as exc:
         print(f"lapwrench tune: the trials are saved in {cut(str(out), 200)}, but the report cannot be written: "
               f"{exc.strerror or exc}", file=sys.stderr)

@@ -50,6 +50,16 @@ class SweepOutcome:
     wall_s: float = 0.0
     nodes: set[str] = field(default_factory=set)
     interrupted: bool = False
+    outside: int = 0  # rows of runs the study no longer has (kept with in_study false, out of the report)
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity: ``taskset`` or a container's cpuset count, unlike
+    ``os.cpu_count()``): what the embedded Ray gets by default, and the most ``--workers`` may ask."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not on Linux
+        return os.cpu_count() or 1
 
 
 def parse_address(address: str) -> tuple[str, int] | None:
@@ -119,7 +129,7 @@ def start_ray(address: str | None, workers: int | None) -> int:
                 ray.init(address=address, **kwargs)
             else:
                 # "local": a new instance of our own, even when another cluster runs on this machine
-                ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
+                ray.init(address="local", num_cpus=workers or available_cpus(), **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             where = f"the Ray cluster at {address}" if address else "a local Ray instance"
             raise ClusterError(f"cannot start or reach {where}: {one_line(exc)}") from exc
@@ -218,12 +228,14 @@ def run_study(
     if others:  # their rows would mix with this study's in the report
         raise StudyError(f"{table.path} holds rows of study {short(others[0])}, not {short(spec.name)}; "
                          "choose another --out")
-    if retry_failed:
-        table.drop(table.failed_ids())
     jobs = expand(spec)
+    ids = {j.run_id for j in jobs}
+    if retry_failed:
+        table.drop(table.failed_ids() & ids)
+    outcome = SweepOutcome(outside=table.mark_study(ids))
     done = table.done
     todo = [j for j in jobs if j.run_id not in done]
-    outcome = SweepOutcome(skipped=len(jobs) - len(todo))
+    outcome.skipped = len(jobs) - len(todo)
     if not todo:
         table.save()
         return outcome, table

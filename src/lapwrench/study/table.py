@@ -3,6 +3,10 @@
 The file is always whole: rows are written to a temporary file beside it and moved into place, so a
 study killed at any moment leaves the rows of every run that finished before, and a rerun skips
 them (:attr:`ResultTable.done`).
+
+A study file edited between two sweeps into the same folder (another grid, fewer seeds or scenarios) leaves
+rows of runs it no longer has: they are kept (a finished run is never thrown away, and comes back if the
+edit is undone) with ``in_study`` false, and left out of the report (:meth:`ResultTable.mark_study`).
 """
 
 from __future__ import annotations
@@ -10,11 +14,13 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
+if TYPE_CHECKING:
+    import pandas as pd
 
 FILE = "runs.parquet"
+IN_STUDY = "in_study"  # column: whether the row's run belongs to the study as the folder's last sweep had it
 STATUSES = ("ok", "failed")  # a row's status: its run finished, or its job raised
 
 
@@ -25,6 +31,8 @@ class TableError(ValueError):
 def to_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """Rows as a table Parquet can store: a column mixing numbers and text (a grid of robot names and
     numbers, say) is stored as text; cells that are missing stay missing."""
+    import pandas as pd  # here: a stop signal's message must not need pandas (lapwrench.study.cli)
+
     frame = pd.DataFrame(rows)
     for col in frame.columns:
         kinds = {type(v) for v in frame[col] if not _missing(v)}
@@ -40,6 +48,8 @@ class ResultTable:
         self.path = out / FILE
         self.rows: list[dict[str, Any]] = []
         if self.path.exists():
+            import pandas as pd
+
             try:
                 with open(self.path, "rb") as f:  # opened here: pyarrow takes only UTF-8 path names
                     old = pd.read_parquet(f)
@@ -69,19 +79,34 @@ class ResultTable:
         self.dirty = True
 
     def add(self, rows: list[dict[str, Any]]) -> None:
-        self.rows.extend(rows)
+        self.rows.extend({**r, IN_STUDY: True} for r in rows)
         self.dirty = True
 
-    def frame(self) -> pd.DataFrame:
-        return to_frame(self.rows)
+    def mark_study(self, run_ids: set[str]) -> int:
+        """Set every row's ``in_study``: whether its run is one of ``run_ids`` (the study's jobs now); returns
+        how many rows are not (kept in the file, left out of :meth:`frame`)."""
+        outside = 0
+        for r in self.rows:
+            inside = r["run_id"] in run_ids
+            outside += not inside
+            if r.get(IN_STUDY) is not inside:  # also a numpy bool read back from the file: made plain
+                r[IN_STUDY] = inside
+                self.dirty = True
+        return outside
+
+    def frame(self, *, everything: bool = False) -> pd.DataFrame:
+        """The rows of the study's runs (all of them, ``in_study`` false too, with ``everything``)."""
+        return to_frame(self.rows if everything else [r for r in self.rows if bool(r.get(IN_STUDY, True))])
 
     def save(self) -> None:
         """Write every row to the file, atomically (temporary file, fsync, rename)."""
         if not self.dirty:
             return
         tmp = self.path.with_suffix(".parquet.tmp")
-        with open(tmp, "wb") as f:  # opened here: pyarrow takes only UTF-8 path names (a folder named in
-            self.frame().to_parquet(f, index=False)  # Latin-1 lost every row of the sweep at its first save)
+        # opened here: pyarrow takes only UTF-8 path names (a folder named in Latin-1 lost every row of the
+        # sweep at its first save)
+        with open(tmp, "wb") as f:
+            self.frame(everything=True).to_parquet(f, index=False)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, self.path)

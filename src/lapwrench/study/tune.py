@@ -124,10 +124,13 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
     from lapwrench.study.table import to_frame
 
     # Ray Tune's own SIGINT handler ends the search quietly and returns the trials so far, which would
-    # then be written up as the result; ours (see lapwrench.study.cli) raises KeyboardInterrupt instead.
+    # then be written up as the result; ours (lapwrench.cli_signals) raises KeyboardInterrupt instead.
     os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"
-    cpus = start_ray(address, workers)
+    output = os.environ.get("RAY_AIR_NEW_OUTPUT")
+    if not progress:  # Tune's new output prints its tables even at verbose 0; its older one prints nothing then
+        os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     try:
+        cpus = start_ray(address, workers)
         tuner = tune.Tuner(
             tune.with_resources(_trainable(spec), {"cpu": 1}),
             param_space={k: d.to_tune() for k, d in spec.search.items()},
@@ -139,6 +142,10 @@ def run_tune(spec: TuneSpec, out: Path, *, address: str | None = None, workers: 
         grid = tuner.fit()
     finally:
         ray.shutdown()
+        if output is None:
+            os.environ.pop("RAY_AIR_NEW_OUTPUT", None)
+        else:
+            os.environ["RAY_AIR_NEW_OUTPUT"] = output
     trials = []
     for i in range(len(grid)):  # ray's ResultGrid is a sequence by __getitem__/__len__ (no __iter__ for mypy)
         result = grid[i]

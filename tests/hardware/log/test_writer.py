@@ -129,3 +129,34 @@ def test_mcap_round_trip_and_report(tmp_path: Path) -> None:
     for name in ("rcm_error.png", "wrenches.png", "mode.png", "joint_commands.png"):
         assert (out / name).stat().st_size > 5000
     assert hw.log_report_main(argparse.Namespace(log=str(tmp_path / "none.mcap"), out=str(out))) == 2
+
+
+BAD_TIMES = {10: 1e15, 11: float("nan"), 12: -5.0, 13: float("inf"), 14: 1e10}  # cycle -> its time
+
+
+def test_records_whose_time_is_no_session_time_are_kept_counted_and_cost_no_other(
+    tmp_path: Path, panda: RobotModel, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A time of 1e15 s overflowed foxglove-sdk's 64-bit ns (the record lost, an error counted); 1e10 s fit
+    the ns but not a Timestamp's 32-bit seconds, and its frame set moved the next one 316 years ahead (no
+    transform after it); NaN, inf and negative times went to 0 unsaid. Now each is logged at the latest
+    good cycle's time, fields as they are, counted, and said in a log_bad_time event and by log-report."""
+    from hardware.log.support import tf_messages
+
+    path = tmp_path / "run.mcap"
+    with RunLogger(path, {"robot": "test"}, model=panda) as log:
+        for k in range(300):
+            log.cycle(record(k, t=BAD_TIMES.get(k, k * 1e-3)))
+        log.event(1e15, "odd", "an event 31 million years in")
+        log.image(float("nan"), np.zeros((8, 8, 3), np.uint8))
+    stats = log.stats()
+    assert stats["errors"] == 0 and stats["bad_times"] == len(BAD_TIMES) + 2 and stats["images"] == 1
+    cycles, events, _ = read_log(path)
+    assert [c["k"] for c in cycles] == list(range(300))  # every cycle, in order (the bad ones at cycle 9's time)
+    assert [c["t"] for c in cycles[10:15]] == [1e15, None, -5.0, None, 1e10]  # its own time, as it came
+    assert len(tf_messages(path)) == 30  # a frame set every 10 ms of the good cycles' time, to the end
+    assert {e["kind"] for e in events} == {"odd", "log_bad_time"}
+    note = next(e["message"] for e in events if e["kind"] == "log_bad_time")
+    assert note.startswith("7 records, events or images had a time that is no session time (0 to 4294967295 s")
+    assert log_report_main(argparse.Namespace(log=str(path), out=str(tmp_path / "report"))) == 0
+    assert "logger: 300 cycles written, 0 dropped, 7 with a bad time" in capsys.readouterr().out

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import stat
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -126,7 +126,8 @@ class _StreamRead:
 
     schemas: dict[int, Any] = field(default_factory=dict)
     channels: dict[int, Any] = field(default_factory=dict)
-    messages: list[Any] = field(default_factory=list)
+    messages: list[Any] = field(default_factory=list)  # of the topics asked for
+    counts: dict[int, int] = field(default_factory=dict)  # channel id -> messages read, of every topic
     truncation: Truncation | None = None
 
 
@@ -157,8 +158,10 @@ def _read_stream(p: Path, size: int, topics: set[str] | None) -> _StreamRead:
                     out.channels[record.id] = record
                 elif isinstance(record, MessageRecord):
                     ch = out.channels.get(record.channel_id)
+                    if ch is not None:
+                        out.counts[ch.id] = out.counts.get(ch.id, 0) + 1
                     if ch is not None and (topics is None or ch.topic in topics):
-                        out.messages.append(record)
+                        out.messages.append(record)  # only these: a camera's images are not held
                 elif isinstance(record, DataEnd):
                     seen_data_end = True
                 elif isinstance(record, Footer):
@@ -297,7 +300,7 @@ class TopicInfo:
 class LogContents:
     """A run log read back: the custom messages as dicts, the stats and the topics."""
 
-    cycles: list[dict[str, Any]] = field(default_factory=list)
+    cycles: list[dict[str, Any]] = field(default_factory=list)  # empty when load_log handed them on
     events: list[dict[str, Any]] = field(default_factory=list)
     meta: dict[str, Any] | None = None
     stats: dict[str, Any] | None = None
@@ -325,12 +328,16 @@ def log_topics(path: str | Path) -> dict[str, TopicInfo]:
     return out
 
 
-def load_log(path: str | Path, *, allow_truncated: bool = False) -> LogContents:
+def load_log(
+    path: str | Path, *, allow_truncated: bool = False, on_cycle: Callable[[dict[str, Any]], None] | None = None
+) -> LogContents:
     """The cycles, events, meta and stats of a run log, and its topics.
 
     A truncated log (the run was killed, the disk filled) is refused unless ``allow_truncated``;
     then every complete record up to the cut is read, the topics are counted from what was read,
-    and :attr:`LogContents.truncated` says where it stopped.
+    and :attr:`LogContents.truncated` says where it stopped. With ``on_cycle``, each cycle is handed
+    to it as it is decoded, in log-time order, and not kept (``cycles`` stays empty): a long log's
+    cycles as dicts take about 8 kB each.
     """
     p = check_log_file(path, allow_truncated=allow_truncated)
     size = p.stat().st_size
@@ -338,13 +345,13 @@ def load_log(path: str | Path, *, allow_truncated: bool = False) -> LogContents:
         out = LogContents(topics=log_topics(p))
         messages = iter_messages(p, _CONTENT_TOPICS)
     else:
-        read = _read_stream(p, size, None)
+        read = _read_stream(p, size, set(_CONTENT_TOPICS))
         out = LogContents(topics=_stream_topics(read), truncated=read.truncation)
-        read.messages = [m for m in read.messages if read.channels[m.channel_id].topic in _CONTENT_TOPICS]
         messages = _decoded(p, read)
+    keep = out.cycles.append if on_cycle is None else on_cycle
     for topic, data in messages:
         if topic == CYCLE_TOPIC:
-            out.cycles.append(data)
+            keep(data)
         elif topic == EVENT_TOPIC:
             out.events.append(data)
         elif topic == META_TOPIC:
@@ -359,13 +366,10 @@ _CONTENT_TOPICS = (CYCLE_TOPIC, EVENT_TOPIC, META_TOPIC, STATS_TOPIC)
 
 def _stream_topics(read: _StreamRead) -> dict[str, TopicInfo]:
     """Topic → :class:`TopicInfo` counted from the messages a stream read recovered."""
-    counts: dict[int, int] = {}
-    for m in read.messages:
-        counts[m.channel_id] = counts.get(m.channel_id, 0) + 1
     out = {}
     for cid, ch in read.channels.items():
         schema = read.schemas.get(ch.schema_id)
-        out[ch.topic] = TopicInfo(schema.name if schema else "", ch.message_encoding, counts.get(cid, 0))
+        out[ch.topic] = TopicInfo(schema.name if schema else "", ch.message_encoding, read.counts.get(cid, 0))
     return out
 
 

@@ -8,12 +8,16 @@ t=1.546 s``, the report of what was read (``"truncated"`` in summary.json) and e
 that cannot be read at all (missing, a directory, empty, not MCAP, corrupt, or cut before its
 first cycle) gives one line on stderr and exit code 2, never a traceback.
 
-A log's values are taken as they come, never trusted: a field that is not a number (text, an
-integer beyond any float, a foreign program's layout) counts as missing, a cycle without a finite
-time is left out, values beyond :data:`LARGEST` are drawn as gaps (an axis that spans them would
-overflow), and summary.json and events.json hold ``null`` where the log has NaN or infinity (they
-stay strict JSON). At most :data:`MAX_PANELS` joints, cues and wrenches are plotted (a damaged
-vector of thousands would take hours to draw); summary.json's ``left_out_of_plots`` names the rest.
+The cycles are read one at a time into the few numbers the report draws (:mod:`.columns`: 0.7 kB a
+cycle, where holding the cycles took 9.2 kB), never held whole: a log of 100 000 cycles is reported in
+392 MB at peak, 1128 MB before (2026-12-03, on the same log, one after the other). A log's values are taken as
+they come, never trusted: a field that is not a number (text, an integer beyond any float, a foreign
+program's layout) counts as missing, a cycle without a session time is left out (and counted in
+summary.json's ``cycles_without_time``), values beyond
+:data:`~.columns.LARGEST` are drawn as gaps (an axis that spans them would overflow), and summary.json
+and events.json hold ``null`` where the log has NaN or infinity (they stay strict JSON). At most
+:data:`~.columns.MAX_PANELS` joints, cues and wrenches are plotted (a damaged vector of thousands would
+take hours to draw); summary.json's ``left_out_of_plots`` names the rest.
 
 The report's files (:data:`REPORT_FILES`) of an earlier report in the same folder are removed first
 and summary.json is written last, so a report cut short (Ctrl-C, a full disk) has no summary.json and
@@ -33,59 +37,21 @@ from typing import Any
 import numpy as np
 
 from lapwrench.cli_types import display_path, output_dir
+from lapwrench.hardware.log.columns import (
+    MAX_PANELS,
+    MODES,
+    SUPERVISOR,
+    CycleColumns,
+    cycle_time,
+    plottable,
+)
 from lapwrench.hardware.log.reader import LogContents, LogFileError, load_log
 from lapwrench.hardware.log.topics import CYCLE_TOPIC
 
-_QUIET_EVENTS = ("start", "deadline_miss", "log_dropped")
+_QUIET_EVENTS = ("start", "deadline_miss", "log_dropped", "log_bad_time")
 # summary.json is written last: a folder without it holds a report cut short (Ctrl-C, a full disk)
 REPORT_FILES = ("summary.json", "events.json", "rcm_error.png", "wrenches.png", "mode.png", "joint_commands.png",
                 "cue_telemetry.png")
-LARGEST = 1e100  # beyond any quantity of a run: such a value is a corrupt record, drawn as a gap
-MAX_PANELS = 16  # joints, cues, wrenches and telemetry fields plotted at most
-
-
-def _num(x: object) -> float:
-    """``x`` as a float if it is a real number (not a bool), else NaN (None, text, a list, an integer
-    beyond any float)."""
-    if isinstance(x, bool) or not isinstance(x, int | float):
-        return math.nan
-    try:
-        return float(x)
-    except OverflowError:
-        return math.nan
-
-
-def _mapping(c: dict[str, Any], key: str) -> dict[str, Any]:
-    """``c[key]`` if it is a mapping, else an empty one."""
-    v = c.get(key)
-    return v if isinstance(v, dict) else {}
-
-
-def _plottable(a: np.ndarray) -> np.ndarray:
-    """``a`` with values that are not finite or beyond :data:`LARGEST` as NaN (gaps in a plot)."""
-    with np.errstate(invalid="ignore"):
-        return np.where(np.abs(a) <= LARGEST, a, np.nan)
-
-
-def _arr(cycles: list[dict[str, Any]], key: str, n: int) -> np.ndarray:
-    """The first ``n`` values of a vector field of every cycle; missing or not numbers → NaN."""
-    out = np.full((len(cycles), n), np.nan)
-    for i, c in enumerate(cycles):
-        v = c.get(key)
-        if isinstance(v, list):
-            row = [_num(x) for x in v[:n]]
-            out[i, : len(row)] = row
-    return out
-
-
-def _col(cycles: list[dict[str, Any]], key: str) -> np.ndarray:
-    """One scalar field of every cycle, ``None`` (or anything not a number) → NaN."""
-    return np.array([_num(c.get(key)) for c in cycles], dtype=float)
-
-
-def _time(c: dict[str, Any]) -> float:
-    """A cycle's time if it is a number within :data:`LARGEST`, else NaN."""
-    return float(_plottable(np.array(_num(c.get("t")))))
 
 
 def _finite_json(value: Any) -> Any:
@@ -99,14 +65,14 @@ def _finite_json(value: Any) -> Any:
     return value
 
 
-def _plot_rcm(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], events: list[dict[str, Any]], out: Path) -> Path:
+def _plot_rcm(plt: Any, t: np.ndarray, cols: CycleColumns, events: list[dict[str, Any]], out: Path) -> Path:
     fig, ax = plt.subplots(figsize=(9, 3.5))
-    ax.plot(t, _plottable(1e3 * _col(cycles, "rcm_error")), label="at the reference (controller)")
-    meas = _plottable(1e3 * _col(cycles, "rcm_error_measured"))
+    ax.plot(t, plottable(1e3 * cols.column("rcm_error")), label="at the reference (controller)")
+    meas = plottable(1e3 * cols.column("rcm_error_measured"))
     if np.isfinite(meas).any():
         ax.plot(t, meas, label="from the measured joints")
     for e in events:
-        when = _time({"t": e.get("time")})
+        when = cycle_time({"t": e.get("time")})
         if e.get("kind") not in _QUIET_EVENTS and math.isfinite(when):
             ax.axvline(when, color="r", lw=0.6, alpha=0.5)
     ax.set(xlabel="time (s)", ylabel="RCM error (mm)", title="RCM error (red lines: supervisor events)")
@@ -115,15 +81,15 @@ def _plot_rcm(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], events: lis
     return _save(fig, out / "rcm_error.png")
 
 
-def _plot_wrenches(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path:
-    names = wrench_names(cycles)[:MAX_PANELS]
+def _plot_wrenches(plt: Any, t: np.ndarray, cols: CycleColumns, out: Path) -> Path:
+    names = sorted(cols.wrenches)[:MAX_PANELS]
     fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     for name in names:
-        w = _arr([{"w": _mapping(c, "wrenches").get(name)} for c in cycles], "w", 6)
-        axes[0].plot(t, _plottable(np.linalg.norm(w[:, 3:], axis=1)), label=name)
-        axes[1].plot(t, _plottable(np.linalg.norm(w[:, :3], axis=1)), label=name)
-    ft = _arr(cycles, "ft_force", 3)
-    axes[0].plot(t, _plottable(np.linalg.norm(ft, axis=1)), "k:", lw=0.8, label="F/T |F| (input)")
+        w = cols.matrix(f"wrench {name}", 6)
+        axes[0].plot(t, plottable(np.linalg.norm(w[:, 3:], axis=1)), label=name)
+        axes[1].plot(t, plottable(np.linalg.norm(w[:, :3], axis=1)), label=name)
+    ft = cols.matrix("ft_force", 3)
+    axes[0].plot(t, plottable(np.linalg.norm(ft, axis=1)), "k:", lw=0.8, label="F/T |F| (input)")
     axes[0].set(ylabel="|force| (N)", title="Wrenches")
     axes[1].set(xlabel="time (s)", ylabel="|moment| (N m)")
     for a in axes:
@@ -132,16 +98,14 @@ def _plot_wrenches(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: P
     return _save(fig, out / "wrenches.png")
 
 
-def _plot_modes(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path:
-    modes = ["idle", "tracking", "handle", "handle+tracking", "handle-dominant"]
-    sup = ["running", "stopping", "holding"]
+def _plot_modes(plt: Any, t: np.ndarray, cols: CycleColumns, out: Path) -> Path:
     fig, axes = plt.subplots(2, 1, figsize=(9, 4.5), sharex=True)
-    axes[0].step(t, [_level(c.get("mode"), modes) for c in cycles], where="post")
-    axes[0].set_yticks(range(len(modes)), modes)
+    axes[0].step(t, cols.column("mode").astype(int), where="post")
+    axes[0].set_yticks(range(len(MODES)), MODES)
     axes[0].set(title="Controller mode")
-    axes[1].step(t, [_level(c.get("supervisor"), sup) for c in cycles], where="post")
-    axes[1].set_yticks(range(len(sup)), sup)
-    alarm = np.array([c.get("alarm") is True for c in cycles], dtype=bool)
+    axes[1].step(t, cols.column("supervisor").astype(int), where="post")
+    axes[1].set_yticks(range(len(SUPERVISOR)), SUPERVISOR)
+    alarm = cols.column("alarm") == 1.0
     if alarm.any():
         axes[1].fill_between(t, -0.5, 2.5, where=alarm, color="r", alpha=0.15, label="alarm")
         axes[1].legend(fontsize=8)
@@ -149,21 +113,15 @@ def _plot_modes(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path
     return _save(fig, out / "mode.png")
 
 
-def _level(value: object, names: list[str]) -> int:
-    """The index of ``value`` among ``names``; -1 for anything else (absent, unknown, not text)."""
-    return names.index(value) if isinstance(value, str) and value in names else -1
-
-
-def _joint_count(cycles: list[dict[str, Any]]) -> int:
+def _joint_count(cols: CycleColumns) -> int:
     """The arm's joint count as the log records it: the length of its joint vectors (at least 1)."""
-    lengths = (len(v) for c in cycles for key in ("q", "q_cmd") if isinstance(v := c.get(key), list))
-    return max(lengths, default=0) or 1
+    return cols.joints or 1
 
 
-def _plot_joints(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path:
-    n = min(_joint_count(cycles), MAX_PANELS)
-    q_cmd = _plottable(_arr(cycles, "q_cmd", n))
-    q = _plottable(_arr(cycles, "q", n))
+def _plot_joints(plt: Any, t: np.ndarray, cols: CycleColumns, out: Path) -> Path:
+    n = min(_joint_count(cols), MAX_PANELS)
+    q_cmd = plottable(cols.matrix("q_cmd", n))
+    q = plottable(cols.matrix("q", n))
     fig, grid = plt.subplots(n, 1, figsize=(9, 11), sharex=True, squeeze=False)
     axes = grid[:, 0]
     for j in range(n):
@@ -177,31 +135,15 @@ def _plot_joints(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Pat
     return _save(fig, out / "joint_commands.png")
 
 
-def telemetry_fields(cycles: list[dict[str, Any]]) -> dict[str, list[str]]:
-    """cue → its telemetry field names, as the log's cycles carry them (first seen first)."""
-    out: dict[str, list[str]] = {}
-    for c in cycles:
-        for cue, values in _mapping(c, "telemetry").items():
-            known = out.setdefault(cue, [])
-            known.extend(f for f in (values if isinstance(values, dict) else ()) if f not in known)
-    return out
-
-
-def wrench_names(cycles: list[dict[str, Any]]) -> list[str]:
-    """The names of the wrenches the log's cycles carry, sorted."""
-    return sorted({k for c in cycles for k in _mapping(c, "wrenches")})
-
-
-def _plot_telemetry(plt: Any, t: np.ndarray, cycles: list[dict[str, Any]], out: Path) -> Path | None:
+def _plot_telemetry(plt: Any, t: np.ndarray, cols: CycleColumns, out: Path) -> Path | None:
     """One panel per cue, one line per telemetry field (None: the log has no telemetry)."""
-    fields = dict(list(telemetry_fields(cycles).items())[:MAX_PANELS])
+    fields = dict(list(cols.telemetry.items())[:MAX_PANELS])
     if not fields:
         return None
     fig, grid = plt.subplots(len(fields), 1, figsize=(9, 2.5 * len(fields) + 0.5), sharex=True, squeeze=False)
     for ax, (cue, names) in zip(grid[:, 0], fields.items(), strict=True):
         for name in names[:MAX_PANELS]:
-            y = [_mapping(_mapping(c, "telemetry"), cue).get(name) for c in cycles]
-            ax.plot(t, _plottable(np.array([_num(v) for v in y], dtype=float)), label=name)
+            ax.plot(t, plottable(cols.telemetry_values(cue, name)), label=name)
         ax.set(title=f"cue {cue}: telemetry")
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
@@ -218,71 +160,84 @@ def _nan_stat(fn: Any, x: np.ndarray, scale: float = 1.0) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def _left_out(cycles: list[dict[str, Any]]) -> list[str]:
+def _left_out(cols: CycleColumns) -> list[str]:
     """What the plots leave out beyond :data:`MAX_PANELS`, in words."""
-    counts = {"joints": _joint_count(cycles), "wrenches": len(wrench_names(cycles))}
-    fields = telemetry_fields(cycles)
+    counts = {"joints": _joint_count(cols), "wrenches": len(cols.wrenches)}
+    fields = cols.telemetry
     counts["cues with telemetry"] = len(fields)
     counts.update({f"telemetry fields of cue {cue}": len(names) for cue, names in list(fields.items())[:MAX_PANELS]})
     return [f"{what} beyond the first {MAX_PANELS} (of {n})" for what, n in counts.items() if n > MAX_PANELS]
 
 
-def _summary(log: LogContents, cycles: list[dict[str, Any]], t: np.ndarray) -> dict[str, Any]:
-    compute = _col(cycles, "compute_us")
+def _summary(log: LogContents, cols: CycleColumns, t: np.ndarray) -> dict[str, Any]:
+    compute = cols.column("compute_us")
     return {
-        "cycles": len(cycles),
+        "cycles": cols.n,
+        "cycles_without_time": cols.read - cols.n,  # left out: no session time (NaN, negative, text...)
         "duration_s": float(np.max(t) - np.min(t)),
-        "rcm_error_max_mm": _nan_stat(np.max, _col(cycles, "rcm_error"), 1e3),
-        "rcm_error_measured_max_mm": _nan_stat(np.max, _col(cycles, "rcm_error_measured"), 1e3),
+        "rcm_error_max_mm": _nan_stat(np.max, cols.column("rcm_error"), 1e3),
+        "rcm_error_measured_max_mm": _nan_stat(np.max, cols.column("rcm_error_measured"), 1e3),
         "compute_p50_us": _nan_stat(lambda x: np.percentile(x, 50), compute),
         "compute_p99_us": _nan_stat(lambda x: np.percentile(x, 99), compute),
         "events": len(log.events),
-        "telemetry": telemetry_fields(cycles),
+        "telemetry": cols.telemetry,
         "truncated": None if log.truncated is None else dataclasses.asdict(log.truncated),
         "log_dropped": None if log.stats is None else log.stats.get("dropped"),
         "log_stats": log.stats,
         "topics": {k: {"schema": v.schema, "messages": v.messages} for k, v in sorted(log.topics.items())},
-        "left_out_of_plots": _left_out(cycles),
+        "left_out_of_plots": _left_out(cols),
     }
+
+
+def read_for_report(path: str | Path, *, allow_truncated: bool = True) -> tuple[LogContents, CycleColumns]:
+    """A log read for its report: the events, meta, stats and topics as :func:`load_log` gives them, the
+    cycles only as :class:`CycleColumns` (never held whole; see :mod:`.columns`)."""
+    cols = CycleColumns()
+    return load_log(path, allow_truncated=allow_truncated, on_cycle=cols.add), cols
 
 
 def make_report(path: str | Path, out: str | Path, *, allow_truncated: bool = True) -> list[Path]:
     """Write the report PNGs (and summary.json, events.json) for a log into ``out``; a truncated
     log is reported as far as it goes (unless not ``allow_truncated``)."""
-    return write_report(load_log(path, allow_truncated=allow_truncated), path, out)
+    log, cols = read_for_report(path, allow_truncated=allow_truncated)
+    return write_report(log, path, out, cols)
 
 
-def write_report(log: LogContents, path: str | Path, out: str | Path) -> list[Path]:
-    """The report of a log already read (:func:`~lapwrench.hardware.log.reader.load_log`); the cycles
-    without a usable time are left out (module docstring)."""
+def write_report(log: LogContents, path: str | Path, out: str | Path, cols: CycleColumns | None = None) -> list[Path]:
+    """The report of a log already read: by :func:`read_for_report` (its ``cols``), or by
+    :func:`~lapwrench.hardware.log.reader.load_log` with its cycles. The cycles without a usable time
+    are left out (module docstring)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cycles = [c for c in log.cycles if math.isfinite(_time(c))]
-    if not cycles:
+    if cols is None:
+        cols = CycleColumns()
+        for c in log.cycles:
+            cols.add(c)
+    if not cols.n:
         if log.truncated is not None:
             raise LogFileError(
                 f"{path}: truncated MCAP file ({log.truncated.size} bytes, {log.truncated.missing})"
                 f" with no complete {CYCLE_TOPIC} message"
             )
-        raise LogFileError(f"{path}: no {CYCLE_TOPIC} messages" + (" with a time" if log.cycles else ""))
+        raise LogFileError(f"{path}: no {CYCLE_TOPIC} messages" + (" with a time" if cols.read else ""))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for name in REPORT_FILES:  # an earlier report's files: never beside this one's, even when it stops halfway
         (out / name).unlink(missing_ok=True)
-    t = np.array([_time(c) for c in cycles])
+    t = cols.column("t")
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")  # numpy's overflow, matplotlib's empty legend: not the user's business
         files = [
-            _plot_rcm(plt, t, cycles, log.events, out),
-            _plot_wrenches(plt, t, cycles, out),
-            _plot_modes(plt, t, cycles, out),
-            _plot_joints(plt, t, cycles, out),
+            _plot_rcm(plt, t, cols, log.events, out),
+            _plot_wrenches(plt, t, cols, out),
+            _plot_modes(plt, t, cols, out),
+            _plot_joints(plt, t, cols, out),
         ]
-        telemetry = _plot_telemetry(plt, t, cycles, out)
-        summary = _finite_json(_summary(log, cycles, t))
+        telemetry = _plot_telemetry(plt, t, cols, out)
+        summary = _finite_json(_summary(log, cols, t))
     if telemetry is not None:
         files.append(telemetry)
     (out / "events.json").write_text(json.dumps(_finite_json(log.events), indent=2, allow_nan=False))
@@ -299,13 +254,17 @@ def _save(fig: Any, path: Path) -> Path:
     return path
 
 
-def truncation_note(path: str | Path, log: LogContents) -> str | None:
-    """The line that says a log is truncated and how much of it was read (``None``: complete)."""
+def truncation_note(path: str | Path, log: LogContents, cols: CycleColumns | None = None) -> str | None:
+    """The line that says a log is truncated and how much of it was read (``None``: complete); ``cols``:
+    the cycles as :func:`read_for_report` gathered them (else ``log.cycles``)."""
     if log.truncated is None:
         return None
-    ts = [t for c in log.cycles if math.isfinite(t := _time(c))]
-    upto = f" up to t={max(ts):.3f} s" if ts else ""
-    return f"lapwrench log-report: {path} is truncated ({log.truncated.missing}); read {len(log.cycles)} cycles{upto}"
+    if cols is None:
+        cols = CycleColumns()
+        for c in log.cycles:
+            cols.add(c)
+    upto = f" up to t={np.max(cols.column('t')):.3f} s" if cols.n else ""
+    return f"lapwrench log-report: {path} is truncated ({log.truncated.missing}); read {cols.read} cycles{upto}"
 
 
 def log_report_main(args: argparse.Namespace) -> int:
@@ -314,22 +273,23 @@ def log_report_main(args: argparse.Namespace) -> int:
     cannot be read or a report that cannot be written (one line on stderr)."""
     path = Path(args.log)
     try:
-        log = load_log(path, allow_truncated=True)
-        files = write_report(log, path, args.out)
+        log, cols = read_for_report(path)
+        files = write_report(log, path, args.out, cols)
     except LogFileError as exc:
         print(f"lapwrench log-report: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:  # the report folder, matplotlib: one line, never a traceback
         print(f"lapwrench log-report: cannot report {path}: {type(exc).__name__}: {str(exc)[:120]}", file=sys.stderr)
         return 2
-    note = truncation_note(path, log)
+    note = truncation_note(path, log, cols)
     if note is not None:
         print(note, file=sys.stderr)
     for f in files:
         print(display_path(f))
     if log.stats is not None:
         stats = _finite_json(log.stats)
-        print(f"logger: {stats.get('cycles')} cycles written, {stats.get('dropped')} dropped")
+        bad = f", {stats['bad_times']} with a bad time" if stats.get("bad_times") else ""
+        print(f"logger: {stats.get('cycles')} cycles written, {stats.get('dropped')} dropped{bad}")
     return 0
 
 

@@ -29,10 +29,19 @@ from lapwrench.hardware.log.topics import (
     WRENCH_TOPIC,
 )
 
+MAX_LOG_TIME_S = float(2**32 - 1)
+"""The latest log time a message can have, in session seconds (136 years): foxglove's ``Timestamp`` keeps
+whole seconds in 32 bits (an MCAP log time, 64-bit ns, would hold 584 years)."""
 
-def log_time_ns(t: float) -> int:
-    """Session seconds → log time in ns (clamped at 0; NaN → 0)."""
-    return max(0, round(t * 1e9)) if math.isfinite(t) else 0
+
+def log_time_ns(t: object) -> int | None:
+    """Session seconds → log time in ns; None for a value that is not a session time (NaN, infinite,
+    negative, beyond :data:`MAX_LOG_TIME_S`, not a number): the writer counts it and uses another time."""
+    try:
+        seconds = float(t)  # type: ignore[arg-type]  # anything: a loop's record is not trusted
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return round(seconds * 1e9) if 0.0 <= seconds <= MAX_LOG_TIME_S else None  # NaN fails the test
 
 
 def _finite_json(x: Any) -> Any:
@@ -106,11 +115,11 @@ class McapSink:
     def write_json(self, topic: str, ns: int, payload: bytes) -> None:
         self.json[topic].log(payload, log_time=ns)
 
-    def write_event(self, time_s: float, kind: str, message: str) -> None:
-        """The event on ``/lapwrench/event`` and, for Foxglove's Log panel, on ``/lapwrench/log``."""
+    def write_event(self, ns: int, time_s: float, kind: str, message: str) -> None:
+        """The event (its time as given, ``time_s``; logged at ``ns``) on ``/lapwrench/event`` and, for
+        Foxglove's Log panel, on ``/lapwrench/log``."""
         from foxglove.messages import Log
 
-        ns = log_time_ns(time_s)
         self.write_json(EVENT_TOPIC, ns, json_bytes({"time": time_s, "kind": kind, "message": message}))
         self.log.log(Log(timestamp=stamp(ns), level=log_level(kind), message=message, name=kind), log_time=ns)
 

@@ -26,10 +26,12 @@ STATS_SCHEMA: dict[str, Any] = {
     "type": "object",
     "properties": {
         k: {"type": "integer"}
-        for k in ("cycles", "dropped", "events", "dropped_events", "images", "dropped_images", "transforms", "errors")
+        for k in ("cycles", "dropped", "events", "dropped_events", "images", "dropped_images", "transforms", "errors",
+                  "bad_times")
     }
     | {
         "first_error": {"type": ["string", "null"]},
+        "first_bad_time": {"type": ["string", "null"]},
         "capacity": {"type": "integer"},
         "transform_rate_hz": {"type": "number"},
     },

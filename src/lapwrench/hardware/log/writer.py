@@ -26,7 +26,7 @@ from lapwrench.hardware.log.messages import (
     wrench_scene_message,
 )
 from lapwrench.hardware.log.record import CycleRecord
-from lapwrench.hardware.log.sink import McapSink, json_bytes, log_time_ns
+from lapwrench.hardware.log.sink import MAX_LOG_TIME_S, McapSink, json_bytes, log_time_ns
 from lapwrench.hardware.log.telemetry import checked_layout, layout_from_meta
 from lapwrench.hardware.log.topics import META_TOPIC, STATS_TOPIC
 
@@ -56,6 +56,8 @@ class LogCounters:
     transforms: int = 0
     errors: int = 0
     first_error: str | None = None
+    bad_times: int = 0  # records, events and images whose time is no session time (written at the latest good one)
+    first_bad_time: str | None = None
 
 
 def _call(job: Callable[[], None]) -> None:
@@ -220,35 +222,50 @@ class RunLogger:
             if c.first_error is None:
                 c.first_error = f"{type(exc).__name__}: {exc}"
 
+    def _log_ns(self, t: float) -> tuple[int, bool]:
+        """The log time of a record, event or image at session time ``t``, and whether ``t`` was one: a
+        time that is not (NaN, infinite, negative, past :data:`MAX_LOG_TIME_S`: foxglove-sdk refuses it,
+        the record would be lost) is counted and the latest cycle's log time is used instead (a
+        ``log_bad_time`` event at close says how many)."""
+        ns = log_time_ns(t)
+        if ns is not None:
+            return ns, True
+        c = self.counters
+        c.bad_times += 1
+        if c.first_bad_time is None:
+            c.first_bad_time = repr(t)[:40]
+        return self._last_ns, False
+
     def _write_event(self, ev: tuple[float, str, str]) -> None:
-        self._sink.write_event(*ev)
+        self._sink.write_event(self._log_ns(ev[0])[0], *ev)
         self.counters.events += 1
 
     def _write_image(self, item: tuple[float, Any, str]) -> None:
         t, frame, fmt = item
-        ns = log_time_ns(t)
+        ns = self._log_ns(t)[0]
         self._sink.image_channel().log(image_message(ns, frame, fmt), log_time=ns)
         self.counters.images += 1
 
     def _write_cycle(self, rec: CycleRecord) -> None:
         """The cycle message. A cycle on the frame grid (session time, 1 µs of slack for rounding)
-        with a finite measured q also queues its frame set, written in the next rounds."""
-        ns = log_time_ns(rec.t)
+        with a finite measured q also queues its frame set, written in the next rounds; a cycle without
+        a session time (:meth:`_log_ns`) is written with its fields as they are, and has no frame set."""
+        ns, timed = self._log_ns(rec.t)
         self._sink.cycle.log(encode_cycle(rec, self.telemetry), ns)
         if self.live is not None:
             self.live.publish_description(ns)
         self.counters.cycles += 1
         self._last_ns = max(self._last_ns, ns)
-        if rec.t >= self._next_frames_t - 1e-6 and not self._jobs:
+        if timed and rec.t >= self._next_frames_t - 1e-6 and not self._jobs:
             q = finite_vector(rec.q)
             if q is not None and (self._solver is None or len(q) == self._solver.nq):
                 self._next_frames_t = (math.floor(rec.t * self.transform_rate_hz + 1e-3) + 1) / self.transform_rate_hz
-                self._jobs.append(functools.partial(self._frames_step1, rec, q))
+                self._jobs.append(functools.partial(self._frames_step1, rec, q, ns))
 
-    def _frames_step1(self, rec: CycleRecord, q: np.ndarray) -> None:
+    def _frames_step1(self, rec: CycleRecord, q: np.ndarray, ns: int) -> None:
         """Forward kinematics of the measured q, the transforms and the scope pose; then the
         second step is queued. Without a model, the joint states only."""
-        ns, sink, solver = log_time_ns(rec.t), self._sink, self._solver
+        sink, solver = self._sink, self._solver
         if solver is None:
             names = [f"joint{j + 1}" for j in range(len(q))]
             sink.joints.log(joint_states_message(ns, names, q, rec.dq, rec.tau_J), log_time=ns)
@@ -258,11 +275,11 @@ class RunLogger:
         sink.tf.log(frame_transforms_message(ns, frames.placements), log_time=ns)
         sink.pose.log(pose_message(ns, frames.pose_E), log_time=ns)
         self.counters.transforms += 1
-        self._jobs.append(functools.partial(self._frames_step2, rec, q, frames))
+        self._jobs.append(functools.partial(self._frames_step2, rec, q, frames, ns))
 
-    def _frames_step2(self, rec: CycleRecord, q: np.ndarray, frames: ScopeFrames) -> None:
+    def _frames_step2(self, rec: CycleRecord, q: np.ndarray, frames: ScopeFrames, ns: int) -> None:
         """The joint states and the wrench arrows of a frame set."""
-        ns, sink, solver = log_time_ns(rec.t), self._sink, self._solver
+        sink, solver = self._sink, self._solver
         assert solver is not None and sink.wrenches is not None
         sink.joints.log(joint_states_message(ns, solver.joint_names, q, rec.dq, rec.tau_J), log_time=ns)
         sink.wrenches.log(wrench_scene_message(ns, solver.base, rec.wrenches, frames.anchors), log_time=ns)
@@ -285,6 +302,8 @@ class RunLogger:
             "transforms": c.transforms,
             "errors": c.errors,
             "first_error": c.first_error,
+            "bad_times": c.bad_times,
+            "first_bad_time": c.first_bad_time,
             "capacity": self.capacity,
             "transform_rate_hz": self.transform_rate_hz,
         }
@@ -307,6 +326,11 @@ class RunLogger:
                 f"{stats['dropped_images']} images (writer behind)"
             )
             self._guarded(self._write_event, (ns / 1e9, "log_dropped", msg))
+            stats = self.stats()
+        if stats["bad_times"]:
+            msg = (f"{stats['bad_times']} records, events or images had a time that is no session time (0 to "
+                   f"{MAX_LOG_TIME_S:.0f} s; the first: {stats['first_bad_time']}): written at the latest cycle's time")
+            self._guarded(self._write_event, (ns / 1e9, "log_bad_time", msg))
             stats = self.stats()
         self._sink.write_json(STATS_TOPIC, ns, json_bytes(stats))
         self._sink.close(stats)
