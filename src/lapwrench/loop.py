@@ -1,9 +1,8 @@
 """The one control loop: robot state + fresh sensor samples → controller → supervisor → robot.
 
-The same loop drives the controller's virtual model (:class:`lapwrench.virtual.VirtualRobot`), the
-MuJoCo world (:class:`lapwrench.sim.robot.SimRobot`) and the Franka
-(:class:`lapwrench.hardware.franka.FrankaRobot`); what differs lives behind the
-:class:`~lapwrench.robot_interface.RobotInterface` and the :class:`~lapwrench.sources.Source` s.
+The same loop drives the virtual model (:class:`lapwrench.virtual.VirtualRobot`), the MuJoCo world
+(:class:`lapwrench.sim.robot.SimRobot`) and the Franka (:class:`lapwrench.hardware.franka.FrankaRobot`); what
+differs lives behind the :class:`~lapwrench.robot_interface.RobotInterface` and the sources.
 
 One cycle (:meth:`ControlLoop.cycle`)::
 
@@ -15,22 +14,20 @@ One cycle (:meth:`ControlLoop.cycle`)::
     robot.command(q)
     after_command(now)                     # the real-time process: F/T drain, shared inputs, peer watch
 
-The hooks (``pre_cycle``, ``after_command``) are guarded like the tick: an exception in one is a
-``hook_error`` alarm (the arm stops to rest), never an escape from the loop.
+The hooks (``pre_cycle``, ``after_command``) are guarded like the tick: an exception in one is a ``hook_error``
+alarm (the arm stops to rest), never an escape from the loop.
 
-The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`). The records a
-cycle and a run produce (:class:`Cycle`, :class:`LoopStats`) live in :mod:`lapwrench.loop_stats`
-and are importable from here.
+The supervisor watches measured state only (:mod:`lapwrench.safety.supervisor`). A cycle's and a run's records
+(:class:`Cycle`, :class:`LoopStats`) live in :mod:`lapwrench.loop_stats`, importable from here.
 
-Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is
-``clock() - t0``. On hardware the clock is ``time.monotonic()`` (the drivers stamp with it) and
-every cycle's busy time is checked against the supervisor's budget (deadline misses, and an alarm
-after too many in a row): its compute time (state read to command computed) plus the loop's own work
-around the previous command (the filter, then everything from the command's return to this read:
-``after_command``, ``on_cycle``'s logging, the run's bookkeeping), which all delays the read. In
-simulation the clock is the simulated time: the simulated robot waits for the loop, so the compute
-time is measured and reported but has no deadline (``wall_deadlines=False``); the time between its
-cycles is the world's, so only the filter and the hooks count there.
+Time: ``clock()`` gives the loop's time in seconds; the session time ``t`` of a cycle is ``clock() - t0``. On hardware
+the clock is ``time.monotonic()`` (the drivers stamp with it) and every cycle's busy time is checked against the
+supervisor's budget (deadline misses, and an alarm after too many in a row): its compute time (state read to command
+computed) plus the loop's own work around the previous command (the filter, then everything from the command's return
+to this read: ``after_command``, ``on_cycle``'s logging, the run's bookkeeping), which all delays the read. In
+simulation the clock is the simulated time: the simulated robot waits for the loop, so the compute time is measured
+and reported but has no deadline (``wall_deadlines=False``); the time between its cycles is the world's, so only the
+filter and the hooks count there.
 """
 
 from __future__ import annotations
