@@ -171,7 +171,8 @@ def test_tune_interrupted_exits_130_and_writes_no_result(tmp_path: Path) -> None
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "lapwrench.cli", "tune", str(tune_file), "--out", str(out),
                              "--workers", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True)
+                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a terminal's job
     trials_dir = out / "ray_tune" / "ctrl-c"
     deadline = time.monotonic() + 240  # interrupt once Tune has started its trials
     while proc.poll() is None and time.monotonic() < deadline and not any(trials_dir.glob("*/params.json")):

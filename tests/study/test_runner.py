@@ -224,7 +224,8 @@ def test_ctrl_c_while_ray_starts_leaves_no_ray_process_behind(tmp_path: Path) ->
     study.write_text(yaml.safe_dump({**STUDY, "grid": {}}))
     proc = subprocess.Popen([sys.executable, "-m", "lapwrench.cli", "sweep", str(study), "--out", str(tmp_path / "out"),
                              "--workers", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True)
+                            env={**os.environ, "MUJOCO_GL": "egl"}, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a terminal's job
     deadline = time.monotonic() + 240
     while proc.poll() is None and time.monotonic() < deadline and not any(
             "DashboardAgent" in line or "dashboard/agent.py" in line for line in _session(proc.pid)):
