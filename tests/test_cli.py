@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -339,27 +340,36 @@ class NotHandledError(Exception):
     """What the test's own SIGTERM handler raises: main() left the signal to it (it would end the tests)."""
 
 
-def test_sigterm_in_a_command_is_one_line_and_exit_143(
-    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+def _assert_log_report_stopped_by_sigterm(
+    command: Callable[..., int], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """SIGTERM (``kill``, a service manager) ends a command as Ctrl-C does, with its own number."""
+    """``lapwrench log-report`` running ``command`` (which meets a SIGTERM) ends with the stop's line and 143;
+    SIGTERM's handler outside the command raises (a test that reached it would fail)."""
     from lapwrench.hardware import cli as hardware_cli
-
-    def killed(*_args: object) -> int:
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(30)  # the signal stops it here (within cli_signals.WAIT_S: this code is not lapwrench's)
-        return 0
 
     def not_handled(*_args: object) -> None:
         raise NotHandledError
 
-    monkeypatch.setattr(hardware_cli, "log_report_main", killed)
+    monkeypatch.setattr(hardware_cli, "log_report_main", command)
     before = signal.signal(signal.SIGTERM, not_handled)
     try:
         assert main(["log-report", "run.mcap"]) == 143
     finally:
         signal.signal(signal.SIGTERM, before)
     assert capsys.readouterr().err == "lapwrench log-report: stopped by SIGTERM\n"
+
+
+def test_sigterm_in_a_command_is_one_line_and_exit_143(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """SIGTERM (``kill``, a service manager) ends a command as Ctrl-C does, with its own number."""
+
+    def killed(*_args: object) -> int:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)  # the signal stops it here (within cli_signals.WAIT_S: this code is not lapwrench's)
+        return 0
+
+    _assert_log_report_stopped_by_sigterm(killed, monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("how", ["swallowed", "still waiting"])
@@ -370,7 +380,6 @@ def test_a_command_that_ends_after_a_stop_signal_never_exits_0(
     still waited for lapwrench's own code when the command returned (this test's code is not lapwrench's):
     the command ran on to its end, but its exit code and line are the stop's, not 0 (a service manager's
     SIGTERM must never look like a finished run)."""
-    from lapwrench.hardware import cli as hardware_cli
 
     def signalled(*_args: object) -> int:
         if how == "swallowed":
@@ -381,16 +390,7 @@ def test_a_command_that_ends_after_a_stop_signal_never_exits_0(
             signal.raise_signal(signal.SIGTERM)  # taken here, where it cannot be raised: it waits
         return 0
 
-    def not_handled(*_args: object) -> None:
-        raise NotHandledError
-
-    monkeypatch.setattr(hardware_cli, "log_report_main", signalled)
-    before = signal.signal(signal.SIGTERM, not_handled)
-    try:
-        assert main(["log-report", "run.mcap"]) == 143
-    finally:
-        signal.signal(signal.SIGTERM, before)
-    assert capsys.readouterr().err == "lapwrench log-report: stopped by SIGTERM\n"
+    _assert_log_report_stopped_by_sigterm(signalled, monkeypatch, capsys)
 
 
 def test_an_error_on_the_way_out_after_ctrl_c_is_the_stop_line(
