@@ -15,12 +15,11 @@ Between them the controller evaluates the cues that run in Python (plugins,
 :mod:`lapwrench.wrenches.base`) on the tick's geometry; the paper's four run here, each only when
 the configuration's ``cues:`` section has it on.
 When the desired acceleration breaks a limit, :func:`saturation_stage` meets the joint box and
-the envelope by changing the lower-priority motion only (the exact QP of
-:mod:`lapwrench.motion.saturation`, compiled); only when that has no solution (the envelope must
-give way, or the RCM task cannot be kept) does the controller run the Python levels of
-:func:`lapwrench.motion.saturation.saturate`. :func:`~lapwrench.motion.reference_shaper.advance_reference`
-gives the next reference. Each equation is the one function of its module, compiled
-(:mod:`lapwrench.jit`); nothing here re-derives one.
+the envelope by changing the lower-priority motion only (the QPs of :mod:`lapwrench.motion.saturation`,
+compiled; the envelope gives way where it must); only when the RCM task cannot be kept does the
+controller run the Python levels of :func:`lapwrench.motion.saturation.saturate`.
+:func:`~lapwrench.motion.reference_shaper.advance_reference` gives the next reference. Each equation
+is the one function of its module, compiled (:mod:`lapwrench.jit`); nothing here re-derives one.
 """
 
 from __future__ import annotations
@@ -39,9 +38,9 @@ from lapwrench.allocation import (
 from lapwrench.jit import kernel
 from lapwrench.motion.envelope import envelope_rows
 from lapwrench.motion.measured_feedback import feedback_step
-from lapwrench.motion.qp import QP_SOLVED
+from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED
 from lapwrench.motion.reference_shaper import acceleration_bounds, advance_reference
-from lapwrench.motion.saturation import VIOLATION_TOL, at_bound, solve_exact
+from lapwrench.motion.saturation import VIOLATION_TOL, at_bound, solve_exact, solve_relaxed
 from lapwrench.motion.virtual_model import (
     add_self_motion_torque,
     damping_jacobian,
@@ -285,10 +284,10 @@ def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinemati
 @kernel
 def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
                      p: TickParams) -> tuple[bool, Mat, np.ndarray, bool]:
-    """Step 7 when the desired acceleration breaks a limit: the joint box and the envelope met as hard
-    rows with the RCM task kept (:func:`~lapwrench.motion.saturation.solve_exact`), then the next
-    reference. Returns (solved, ref rows [q⁺, q̇⁺, q̈⁺], which rows are at a bound, clamped); not
-    solved (no solution with every row hard, or a non-finite demand) leaves the step to Python."""
+    """Step 7 when the desired acceleration breaks a limit: the box and envelope met with the RCM task kept
+    (:func:`~lapwrench.motion.saturation.solve_exact`), else the envelope relaxed as little as the box allows
+    (:func:`~lapwrench.motion.saturation.solve_relaxed`); then the next reference. Returns (solved, ref rows
+    [q⁺, q̇⁺, q̈⁺], rows at or beyond a bound, clamped); not solved (task not kept, or non-finite a_d): Python."""
     n = q.shape[0]
     m = n + 4 if p.envelope_enabled else n
     ref = np.zeros((3, n))
@@ -297,6 +296,8 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
         return False, ref, at, False
     C, lo, hi, scale = sat.C[:m], sat.lo[:m], sat.hi[:m], sat.scale[:m]
     a, status = solve_exact(Minv, sat.a_d, sat.J_task, C, lo, hi, scale)
+    if status == QP_INFEASIBLE and m > n:  # the envelope gives way to the robot's limits
+        a, _, status = solve_relaxed(Minv, sat.M, sat.a_d, sat.J_task, C, lo, hi, scale, np.arange(m) < n)
     if status != QP_SOLVED:
         return False, ref, at, False
     ref[0], ref[1], ref[2], clamped = advance_reference(q, dq, a, sat.lo[:n], sat.hi[:n], p.dt)

@@ -4,11 +4,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import quadprog
 
 from lapwrench.config import load
 from lapwrench.controller import Controller
+from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED
 from lapwrench.motion.reference_shaper import ReferenceShaper, ReferenceState
-from lapwrench.motion.saturation import BOX_WIDENING, LimitRows, saturate
+from lapwrench.motion.saturation import (
+    BOX_WIDENING,
+    RELAXED_CHECK_TOL,
+    SLACK_WEIGHT,
+    LimitRows,
+    saturate,
+    solve_exact,
+    solve_relaxed,
+)
 from lapwrench.rcm.geometry import initial_rcm_point, lateral_rcm_jacobian
 from lapwrench.robot.limits import limit_usage
 from lapwrench.robot.model import RobotModel
@@ -134,3 +144,100 @@ def test_the_controller_stops_when_the_rcm_task_cannot_be_kept() -> None:
     )
     assert log.results[-1].rcm_infeasible
     assert any("cannot be kept" in e.message for e in ctrl.events)
+
+
+def _envelope_problem(seed: int) -> tuple[np.ndarray, ...]:
+    """A random 7-joint problem: SPD M, a 2-row task, a wide demand, the joint box (hard, scale 10) and
+    four envelope rows (soft), the first one away from zero so the envelope often fights the box."""
+    rng = np.random.default_rng(seed)
+    n = 7
+    A = rng.standard_normal((n, n))
+    M, J, a_d = A @ A.T + 0.5 * np.eye(n), rng.standard_normal((2, n)), 20.0 * rng.standard_normal(n)
+    lo_e, hi_e = -rng.uniform(0, 3, 4), rng.uniform(0, 3, 4)
+    lo_e[0], hi_e[0] = 5.0, 6.0
+    C = np.vstack([np.eye(n), rng.standard_normal((4, n))])
+    lo, hi = np.r_[-rng.uniform(1, 15, n), lo_e], np.r_[rng.uniform(1, 15, n), hi_e]
+    return M, J, a_d, C, lo, hi, np.r_[np.full(n, 10.0), rng.uniform(0.5, 3, 4)], np.arange(n + 4) < n
+
+
+def _quadprog_relaxed(M: np.ndarray, J: np.ndarray, a_d: np.ndarray, C: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                      scale: np.ndarray, hard: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The relaxed level written for quadprog as the module wrote it before it was compiled."""
+    n, m = a_d.shape[0], int((~hard).sum())
+    G = np.zeros((n + m, n + m))
+    G[:n, :n], G[n:, n:] = M, np.eye(m) * SLACK_WEIGHT * np.trace(M) / n
+    Cx = np.zeros((C.shape[0], n + m))
+    Cx[:, :n] = C / scale[:, None]
+    Cx[np.flatnonzero(~hard), n + np.arange(m)] = 1.0
+    E = np.hstack([J, np.zeros((J.shape[0], m))])
+    A = np.vstack([E, Cx, Cx * np.where(np.arange(n + m) < n, -1.0, 1.0)]).T
+    b = np.concatenate([J @ a_d, lo / scale - BOX_WIDENING, BOX_WIDENING - hi / scale])
+    try:
+        x = quadprog.solve_qp(G, np.r_[M @ a_d, np.zeros(m)], A, b, J.shape[0])[0]
+    except ValueError:
+        return None
+    return x[:n], x[n:]
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_the_compiled_relaxed_level_keeps_task_and_box_at_no_more_cost_than_quadprog(seed: int) -> None:
+    """The envelope gives way, the box and the task do not: solved exactly when the hard level alone
+    (task and box) has a solution, at a cost no higher than quadprog's for the same problem."""
+    M, J, a_d, C, lo, hi, scale, hard = _envelope_problem(seed)
+    n = a_d.shape[0]
+    a, slack, status = solve_relaxed(np.linalg.inv(M), M, a_d, J, C, lo, hi, scale, hard)
+    _, hard_status = solve_exact(np.linalg.inv(M), a_d, J, C[:n].copy(), lo[:n].copy(), hi[:n].copy(),
+                                 scale[:n].copy())
+    assert status == hard_status and status in (QP_SOLVED, QP_INFEASIBLE)
+    if status == QP_INFEASIBLE:
+        return
+    np.testing.assert_allclose(J @ a, J @ a_d, atol=1e-7 * (1 + np.abs(J @ a_d).max()))
+    tol = RELAXED_CHECK_TOL * scale[:n]  # checked in the kernel: beyond it, the kernel says QP_NUMERICAL
+    assert np.all(a >= lo[:n] - tol) and np.all(a <= hi[:n] + tol)
+    y = C[n:] @ a / scale[n:]  # each envelope row within its bounds widened by its slack
+    assert np.all(y >= lo[n:] / scale[n:] - slack - RELAXED_CHECK_TOL)
+    assert np.all(y <= hi[n:] / scale[n:] + slack + RELAXED_CHECK_TOL)
+    ref = _quadprog_relaxed(M, J, a_d, C, lo, hi, scale, hard)
+    if ref is not None:  # quadprog also reports some of these feasible problems "inconsistent"
+        w = SLACK_WEIGHT * np.trace(M) / n
+
+        def cost(x: np.ndarray, s: np.ndarray) -> float:
+            return float(0.5 * (x - a_d) @ M @ (x - a_d) + 0.5 * w * s @ s)
+
+        assert cost(a, slack) <= cost(*ref) * (1 + 1e-7)
+
+
+def test_an_envelope_pressed_into_a_corner_is_relaxed_in_the_compiled_tick(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A steady 3 N side push with the grip closed and two instruments in view, on the light-damping
+    preset, for 15 s (the robot at its reference) drives the scope into the depth and roll walls with
+    joints at their limits, where the envelope must give way (bench/tick.py's light hand, held longer):
+    the compiled tick relaxes it, so the Python levels run only on ticks where the RCM task itself
+    cannot be kept. The references stay inside the joint limits; the RCM error stays under 0.5 mm."""
+    import lapwrench.controller
+    from lapwrench.sensors import ForceTorqueReading, InstrumentObservation, RobotReading, SensorFrame, TactileReading
+    from lapwrench.virtual import home_pose
+
+    python_levels: list[bool] = []
+
+    def spy(*args: np.ndarray) -> object:
+        sat = saturate(*args)  # type: ignore[arg-type]
+        python_levels.append(sat.feasible)
+        return sat
+
+    monkeypatch.setattr(lapwrench.controller, "saturate", spy)
+    ctrl = Controller(load("swapped-damping"))
+    ctrl.reset(home_pose("panda"))
+    tactile, relaxed, rcm = TactileReading(np.full(64, 62.5)), 0, 0.0
+    for k in range(15000):
+        t, ref = k * ctrl.dt, ctrl.ref
+        assert ref is not None
+        points = np.array([[480.0 + 50 * np.sin(k * 1e-3), 300.0], [150.0, 200.0]])
+        r = ctrl.tick(SensorFrame(t, ForceTorqueReading(np.array([4.0 * np.sin(t), 3.0, 0.0]), np.zeros(3), t),
+                                  tactile, InstrumentObservation(points, t), RobotReading(ref.q, ref.dq, None, t)))
+        relaxed += {"depth_max", "roll_range"} <= set(r.limits_active)
+        rcm = max(rcm, r.rcm_error)
+        lim = ctrl.model.limits
+        assert np.all(r.q_ref >= lim.position_lower) and np.all(r.q_ref <= lim.position_upper)
+    assert relaxed > 1000  # the corner was reached and held
+    assert not any(python_levels)  # only the task's own infeasible ticks (if any) went to Python
+    assert rcm < 5e-4

@@ -13,8 +13,9 @@ solves greedily, by saturating the most violated joint at its bound until the re
 saturation can miss a solution that exists: on 40 random states with random null-space demands it
 found none in 16 cases where one did (tests/motion/test_saturation.py keeps those cases). So the
 problem is solved exactly, as a small hierarchical QP, with the Goldfarb-Idnani dual active-set
-method (compiled, :mod:`lapwrench.motion.qp`, a few µs for 7 joints; ``quadprog`` for the rarer
-levels below and as the fallback when round-off defeats the compiled solver):
+method (compiled, :mod:`lapwrench.motion.qp`: a few µs for 7 joints with every row hard, about 15 µs
+with the envelope relaxed; ``quadprog`` when the task cannot be kept and as the fallback when round-off
+defeats the compiled solver):
 
 1. the RCM task and the robot's joint limits, together (hard constraints);
 2. the envelope: first as hard constraints too (the common case, the smaller QP); if levels 1
@@ -36,8 +37,8 @@ import numpy as np
 import quadprog
 
 from lapwrench.jit import kernel
-from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED, dual_active_set
-from lapwrench.spatial import Mat, Vec
+from lapwrench.motion.qp import QP_INFEASIBLE, QP_NUMERICAL, QP_SOLVED, dual_active_set
+from lapwrench.spatial import Mat, Vec, inner
 
 # A row is active when its violation by a_d exceeds this fraction of its scale (round-off guard),
 # and counted as saturated in the solution when it lies within this fraction of its bound.
@@ -53,6 +54,9 @@ SLACK_WEIGHT = 1e6
 TASK_FALLBACK_REGULARISATION = 1e-6
 # An envelope row whose slack exceeds this (in units of its deceleration scale) counts as relaxed.
 RELAXED_TOL = 1e-6
+# The compiled relaxed level's solution must meet its (normalised) rows to this, else quadprog solves it:
+# round-off in its ill-conditioned metric moves the iterate off active rows by ~3e-7 in random tests.
+RELAXED_CHECK_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -148,12 +152,11 @@ def solve_exact(Minv: Mat, a_d: Vec, J: Mat, C: Mat, lo: Vec, hi: Vec, scale: Ve
     return dual_active_set(Minv, a_d, J, C, lo, hi, BOX_WIDENING * scale, scale, max_iter)
 
 
-def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
+def _solve_exact(a_d: Vec, Minv: Mat, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
     """min ½ (a - a_d)ᵀ M (a - a_d) s.t. J a = J a_d and every row; None if infeasible."""
     f = np.ascontiguousarray
-    a_d, M, J, C = f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64), f(rows.C, dtype=np.float64)
+    C = f(rows.C, dtype=np.float64)
     lo, hi, scale = f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64), f(rows.scale, dtype=np.float64)
-    Minv: Mat = np.linalg.inv(M)  # type: ignore[assignment]  # float64 in and out; numpy's stubs: "floating"
     a, status = solve_exact(Minv, a_d, J, C, lo, hi, scale)
     if status == QP_SOLVED:
         return a
@@ -165,9 +168,85 @@ def _solve_exact(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec | None:
         return None
 
 
-def _solve(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> tuple[Vec, Vec] | None:
-    """min ½ (a - a_d)ᵀ M (a - a_d) + ½ w |σ|² s.t. J a = J a_d, hard rows, and the soft rows
-    relaxed by σ (in units of their scale); (a, σ) or None if the hard level is infeasible."""
+@kernel
+def solve_relaxed(Minv: Mat, M: Mat, a_d: Vec, J: Mat, C: Mat, lo: Vec, hi: Vec, scale: Vec,
+                  hard: np.ndarray) -> tuple[Vec, Vec, int]:
+    """Level 2 relaxed, compiled: min ½ (a - a_d)ᵀ M (a - a_d) + ½ w |σ|² s.t. J a = J a_d, the hard
+    rows, and each soft row i relaxed by its slack σᵢ (in units of its scale) on both sides,
+    lo_i/s_i - σᵢ <= c_iᵀ a / s_i <= hi_i/s_i + σᵢ, with w = SLACK_WEIGHT trace(M)/n.
+
+    The same :func:`~lapwrench.motion.qp.dual_active_set` on x = [a; σ]: M⁻¹ becomes
+    blockdiag(M⁻¹, I/w), the unconstrained optimum [a_d; 0], and a soft row two one-sided rows
+    (c_iᵀ a / s_i + σᵢ >= lo_i/s_i and c_iᵀ a / s_i - σᵢ <= hi_i/s_i). Every row is widened by
+    BOX_WIDENING (of its scale, the rows being normalised). Returns (a, σ per soft row, status)."""
+    n, k, m = a_d.shape[0], J.shape[0], C.shape[0]
+    soft = 0
+    for i in range(m):
+        soft += not hard[i]
+    nx, rows = n + soft, m + soft
+    w = 0.0
+    for i in range(n):
+        w += M[i, i]
+    w = SLACK_WEIGHT * w / n
+    Minv_x = np.zeros((nx, nx))
+    Minv_x[:n, :n] = Minv
+    x0 = np.zeros(nx)
+    x0[:n] = a_d
+    E = np.zeros((k, nx))
+    E[:, :n] = J
+    Cx = np.zeros((rows, nx))
+    lo_x = np.empty(rows)
+    hi_x = np.empty(rows)
+    j = 0
+    for i in range(m):
+        Cx[i, :n] = C[i] / scale[i]
+        lo_x[i], hi_x[i] = lo[i] / scale[i], hi[i] / scale[i]
+        if not hard[i]:  # row i keeps its lower side with +σ; row m + j its upper side with -σ
+            Minv_x[n + j, n + j] = 1.0 / w
+            Cx[i, n + j] = 1.0
+            hi_x[i] = np.inf
+            Cx[m + j, :n] = Cx[i, :n]
+            Cx[m + j, n + j] = -1.0
+            lo_x[m + j], hi_x[m + j] = -np.inf, hi[i] / scale[i]
+            j += 1
+    widen = np.full(rows, BOX_WIDENING)
+    x, status = dual_active_set(Minv_x, x0, E, Cx, lo_x, hi_x, widen, np.ones(rows), 4 * (k + 2 * rows) + 20)
+    if status == QP_SOLVED and not _meets(x, Cx, lo_x, hi_x, J, a_d):
+        status = QP_NUMERICAL  # round-off carried the iterate off an active row: quadprog instead
+    return x[:n].copy(), x[n:].copy(), status
+
+
+@kernel
+def _meets(x: Vec, C: Mat, lo: Vec, hi: Vec, J: Mat, a_d: Vec) -> bool:
+    """Whether x meets every row lo <= C x <= hi within RELAXED_CHECK_TOL and its first n entries keep
+    J a = J a_d to 1e-6 of J a_d (the metric of the relaxed level has a condition number near
+    SLACK_WEIGHT, so its solution is checked, not trusted)."""
+    for i in range(C.shape[0]):
+        y = inner(C[i], x)
+        if y < lo[i] - RELAXED_CHECK_TOL or y > hi[i] + RELAXED_CHECK_TOL or not np.isfinite(y):
+            return False
+    n = a_d.shape[0]
+    Ja_d = J @ a_d
+    err = J @ x[:n] - Ja_d
+    return bool(np.abs(err).max() <= 1e-6 * (1.0 + np.abs(Ja_d).max()))
+
+
+def _solve(a_d: Vec, Minv: Mat, M: Mat, J: Mat, rows: LimitRows) -> tuple[Vec, Vec] | None:
+    """:func:`solve_relaxed`; (a, σ) or None if the hard level is infeasible. quadprog solves the same
+    problem when round-off defeats the compiled solver."""
+    f = np.ascontiguousarray
+    C, lo, hi = f(rows.C, dtype=np.float64), f(rows.lo, dtype=np.float64), f(rows.hi, dtype=np.float64)
+    scale = f(rows.scale, dtype=np.float64)
+    a, slack, status = solve_relaxed(Minv, M, a_d, J, C, lo, hi, scale, f(rows.hard, dtype=np.bool_))
+    if status == QP_SOLVED:
+        return a, slack
+    if status == QP_INFEASIBLE:
+        return None
+    return _solve_quadprog(a_d, M, J, rows)
+
+
+def _solve_quadprog(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> tuple[Vec, Vec] | None:
+    """:func:`solve_relaxed`'s problem by quadprog (its fallback, and the tests' reference)."""
     n = a_d.shape[0]
     soft = ~rows.hard
     m = int(soft.sum())
@@ -193,7 +272,9 @@ def _closest_task(a_d: Vec, M: Mat, J: Mat, rows: LimitRows) -> Vec:
     """When the task cannot be met: min ½ |J a - J a_d|² + ½ ε (a - a_d)ᵀ M (a - a_d) inside the hard rows.
 
     The hard rows are the joint box, never empty, so this always has a solution: the task comes as
-    close as the robot's limits allow while the caller brings the arm to rest.
+    close as the robot's limits allow while the caller brings the arm to rest. quadprog, not the
+    compiled solver: this metric's condition number (about 1/ε) lets round-off carry the compiled
+    iterates off their active bounds (by 1e-4 of a row's scale in tests), and the arm is stopping anyway.
     """
     hard = rows.hard
     eps = TASK_FALLBACK_REGULARISATION * float(np.trace(J @ J.T)) / float(np.trace(M))
@@ -233,10 +314,13 @@ def saturate(a_d: Vec, J: Mat, M: Mat, rows: LimitRows) -> SaturationResult:
     """
     if not np.isfinite(a_d).all() or rows.admits(a_d):
         return SaturationResult(a_d, (), (), True)
-    a = _solve_exact(a_d, M, J, rows)  # every row met: the common case, a smaller QP
+    f = np.ascontiguousarray
+    a_d, M, J = f(a_d, dtype=np.float64), f(M, dtype=np.float64), f(J, dtype=np.float64)
+    Minv: Mat = np.linalg.inv(M)  # type: ignore[assignment]  # float64 in and out; numpy's stubs: "floating"
+    a = _solve_exact(a_d, Minv, M, J, rows)  # every row met: the common case, a smaller QP
     if a is not None:
         return SaturationResult(a, _saturated(rows, a), (), True)
-    sol = None if rows.hard.all() else _solve(a_d, M, J, rows)
+    sol = None if rows.hard.all() else _solve(a_d, Minv, M, J, rows)
     if sol is None:
         a = _closest_task(a_d, M, J, rows)
         return SaturationResult(a, _saturated(rows, a), (), False)
