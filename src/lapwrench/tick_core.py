@@ -36,7 +36,7 @@ from lapwrench.allocation import (
     task_priority_torque,
     weighted_pseudo_inverse,
 )
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.motion.envelope import envelope_rows
 from lapwrench.motion.measured_feedback import feedback_step
 from lapwrench.motion.qp import QP_SOLVED
@@ -79,7 +79,7 @@ from lapwrench.wrenches.rcm import rcm_feedforward, rcm_force
 from lapwrench.wrenches.tracking import virtual_force
 
 
-@kernel
+@kernel_inlined
 def geometry_stage(
     kin: Kinematics,
     rcm: AdaptiveState,
@@ -154,7 +154,7 @@ def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
     return worst > VIOLATION_TOL
 
 
-@kernel
+@kernel_inlined
 def motion_stage(
     kin: Kinematics,
     Minv: Mat,
@@ -307,7 +307,7 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
 MotionTail = tuple[Mat, Mat, int, float, int, bool, bool, bool, bool]  # what motion_tail returns (its docstring)
 
 
-@kernel
+@kernel_inlined
 def motion_tail(
     kin: Kinematics, geo: TaskGeometry, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec, has_tactile: bool,
     points: Mat, extra_W: Mat, extra_points: Mat, extra_D: Mat, extra_task_F: Vec, ddq_ref: Vec, stopping: bool,
@@ -349,7 +349,7 @@ def motion_tail(
     return W, ref, at_mask, o.delta, o.contacts, o.non_finite, admitted, saturated, clamped
 
 
-@kernel
+@kernel_inlined
 def tick_front(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
     R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,
