@@ -268,7 +268,7 @@ class SaturationInputs(NamedTuple):
         )
 
 
-@kernel
+@kernel_inlined
 def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinematics, a_max: Vec) -> None:
     """Write the saturation step's inputs into ``sat`` (the rows of :class:`SaturationInputs`)."""
     n = kin.q.shape[0]
@@ -282,7 +282,7 @@ def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinemati
     sat.wall[:] = o.env_wall
 
 
-@kernel
+@kernel_inlined
 def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
                      p: TickParams) -> tuple[bool, Mat, np.ndarray, bool]:
     """Step 7 when the desired acceleration breaks a limit: the joint box and the envelope met as hard

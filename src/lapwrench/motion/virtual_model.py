@@ -22,14 +22,14 @@ from typing import Literal
 import numpy as np
 
 from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec, lu_solve_in_place, matmul
 
 Integrator = Literal["semi_implicit", "explicit"]  # motion.integrator
 
 
-@kernel
+@kernel_inlined
 def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     """N_Eᵀ = I - J_Eᵀ Λ_E J_E M⁻¹, Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹: keeps the part of a torque that leaves {E} still.
 
@@ -45,7 +45,7 @@ def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     return nullspace_projector(weighted_pseudo_inverse(J, Minv).T, J.T)
 
 
-@kernel
+@kernel_inlined
 def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     """Damping matrix B_s of the arm's self-motion: τ_s = -B_s θ̇, B_s = d N_Eᵀ M = d M N_E.
 
@@ -104,7 +104,7 @@ def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: f
     return tau
 
 
-@kernel
+@kernel_inlined
 def euler_velocity_step(
     kin: Kinematics,
     tau: Vec,

@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from lapwrench.config import AdaptiveRcmConfig
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.shaping import RampVariant, sine_ramp
 from lapwrench.spatial import Mat, Vec, inner, matvec
 
@@ -195,7 +195,7 @@ def gate_weight(st: AdaptiveState, P: Mat, twist: Vec, dt: float, p: AdaptivePar
     return sc[0]
 
 
-@kernel
+@kernel_inlined
 def adaptive_rcm_step(
     st: AdaptiveState, P: Mat, residual: Vec, has_residual: bool, twist: Vec, dt: float, p: AdaptiveParams
 ) -> Vec:

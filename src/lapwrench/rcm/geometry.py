@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.robot.model import Kinematics, ScopeAxis
 from lapwrench.spatial import Mat, Vec, inner, matmul, matvec, skew
 
@@ -74,7 +74,7 @@ def axis_rcm_error_and_depth(p_E: Vec, d_z: Vec, P: Mat, p_R: Vec, length: float
     return math.sqrt(inner(e, e)), insertion_depth(axis, p_R, length)
 
 
-@kernel
+@kernel_inlined
 def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """Eq (28): J_R = ∂e_R/∂θ (3 x n), analytic.
 
@@ -123,7 +123,7 @@ def lateral_task(R_E: Mat, J_R: Mat) -> Mat:
     return matmul(R_E[:, :2].T, J_R)
 
 
-@kernel
+@kernel_inlined
 def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
     rate = matvec(J_R, kin.dq)
@@ -135,7 +135,7 @@ def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     return rate
 
 
-@kernel
+@kernel_inlined
 def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
     """ë_R when θ̈ = 0 and p̈_R = 0: the velocity-product part of the RCM error's acceleration,
     ë_R = J_R θ̈ + (this), which eq (2) leaves uncompensated (:func:`lapwrench.wrenches.rcm.rcm_feedforward`).
@@ -175,7 +175,7 @@ def closest_point(kin: Kinematics | ScopeAxis, s_star: float, length: float) -> 
     return kin.p_E + o_G, o_G
 
 
-@kernel
+@kernel_inlined
 def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
     """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
     S = skew(o_G)
