@@ -138,14 +138,14 @@ class MotionOutput(NamedTuple):
     admitted: bool  # a_d meets the joint box and the envelope: nothing to saturate
 
 
-@kernel
+@kernel_inlined
 def null_brake(J_task: Mat, Minv: Mat, dq: Vec, stop_time: float) -> Vec:
     """N θ̇ / T_stop with N = I - J⁺ J (J⁺ M-weighted, eq 3-4): a deceleration of the null-space motion only."""
     J_pinv = weighted_pseudo_inverse(J_task, Minv)
     return (dq - J_pinv @ (J_task @ dq)) / stop_time
 
 
-@kernel
+@kernel_inlined
 def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
     """True if some row's violation exceeds the round-off tolerance (motion/saturation.py)."""
     worst = -np.inf

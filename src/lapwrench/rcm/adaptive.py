@@ -97,7 +97,7 @@ class AdaptiveState(NamedTuple):
         return AdaptiveState(p, p.copy(), np.zeros(3), np.zeros(6), scalars)
 
 
-@kernel
+@kernel_inlined
 def residual_force(F_s: Vec, F_m: Vec) -> Vec:
     """Eq (19), per axis: ΔF = F_s - F_m (both in {B}; see the module docstring for signs)."""
     return F_s - F_m

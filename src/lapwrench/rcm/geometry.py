@@ -36,7 +36,7 @@ def initial_rcm_point(kin: Kinematics | ScopeAxis, length: float, lambda0: float
     return kin.p_E + lambda0 * length * kin.d_z
 
 
-@kernel
+@kernel_inlined
 def rcm_error(kin: Kinematics | ScopeAxis, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
     P, p_E = kin.P, kin.p_E
@@ -93,7 +93,7 @@ def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return ((d @ r) * Sd + np.outer(d, r @ Sd)) @ J_w - kin.P @ J_v
 
 
-@kernel
+@kernel_inlined
 def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """P J_R = (d_zᵀ r) [d_z]x J_Eω - P J_Ev: the RCM Jacobian restricted to the lateral plane.
 
@@ -117,7 +117,7 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return J
 
 
-@kernel
+@kernel_inlined
 def lateral_task(R_E: Mat, J_R: Mat) -> Mat:
     """The lateral RCM task J = [x_E  y_E]ᵀ J_R (2 x n): the RCM error's two rates across the shaft."""
     return matmul(R_E[:, :2].T, J_R)
@@ -161,14 +161,14 @@ def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
     return -a - c_ddot * d - 2.0 * c_dot * d_dot - c * d_ddot
 
 
-@kernel
+@kernel_inlined
 def closest_point_parameter(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
     s = _axial(kin, p_R) / length
     return min(1.0, max(0.0, s))
 
 
-@kernel
+@kernel_inlined
 def closest_point(kin: Kinematics | ScopeAxis, s_star: float, length: float) -> tuple[Vec, Vec]:
     """Eqs (31)-(32): p_G = p_E + s* L d_z and its offset o_G = s* L d_z."""
     o_G = s_star * length * kin.d_z
