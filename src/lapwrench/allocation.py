@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.spatial import Mat, Vec, all_finite, cholesky_inverse, matmul, matvec
 
 # Eigenvalues of J M⁻¹ Jᵀ below this fraction of the largest are damped (see ``regularised_inverse``).
@@ -126,7 +126,7 @@ def nullspace_projector(J: Mat, J_pinv: Mat) -> Mat:
     return N
 
 
-@kernel
+@kernel_inlined
 def nullspace_wrench(W: Mat, points: Mat, p_G: Vec) -> Vec:
     """Eq (38): W_n = Q_h W_h + Q_c W_c + W_f, every wrench moved to p_G with its Q (eq 39).
 
@@ -146,13 +146,13 @@ def nullspace_wrench(W: Mat, points: Mat, p_G: Vec) -> Vec:
     return W_n
 
 
-@kernel
+@kernel_inlined
 def nullspace_torque(J_G: Mat, W_n: Vec) -> Vec:
     """Eq (37): τ_n = J_Gᵀ W_n."""
     return matvec(J_G.T, W_n)
 
 
-@kernel
+@kernel_inlined
 def task_priority_torque(J_R: Mat, F_r: Vec, N_r: Mat, tau_n: Vec) -> Vec:
     """Eq (2): τ = J_Rᵀ F_r + N_rᵀ τ_n."""
     n = J_R.shape[1]

@@ -96,6 +96,12 @@ def kernel(fn: F) -> F:
     return numba.njit(cache=True, nogil=True)(fn)  # type: ignore[return-value]
 
 
+def kernel_inlined(fn: F) -> F:
+    """:func:`kernel`, inlined into its callers by numba (``inline='always'``): for the stages of the tick, each
+    called once, whose calls hand on whole named tuples (a reference count on every array of them)."""
+    return numba.njit(cache=True, nogil=True, inline="always")(fn)  # type: ignore[return-value]  # as kernel
+
+
 def cache_is_warm() -> bool:
     """True when this source version's kernels have been compiled and cached before (a first run compiles
     them, minutes on a small machine: commands say so rather than look stalled)."""

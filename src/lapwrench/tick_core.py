@@ -35,7 +35,7 @@ from lapwrench.allocation import (
     task_priority_torque,
     weighted_pseudo_inverse,
 )
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.motion.envelope import envelope_rows
 from lapwrench.motion.measured_feedback import feedback_step
 from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED
@@ -78,7 +78,7 @@ from lapwrench.wrenches.rcm import rcm_feedforward, rcm_force
 from lapwrench.wrenches.tracking import virtual_force
 
 
-@kernel
+@kernel_inlined
 def geometry_stage(
     kin: Kinematics,
     rcm: AdaptiveState,
@@ -137,14 +137,14 @@ class MotionOutput(NamedTuple):
     admitted: bool  # a_d meets the joint box and the envelope: nothing to saturate
 
 
-@kernel
+@kernel_inlined
 def null_brake(J_task: Mat, Minv: Mat, dq: Vec, stop_time: float) -> Vec:
     """N θ̇ / T_stop with N = I - J⁺ J (J⁺ M-weighted, eq 3-4): a deceleration of the null-space motion only."""
     J_pinv = weighted_pseudo_inverse(J_task, Minv)
     return (dq - J_pinv @ (J_task @ dq)) / stop_time
 
 
-@kernel
+@kernel_inlined
 def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
     """True if some row's violation exceeds the round-off tolerance (motion/saturation.py)."""
     worst = -np.inf
@@ -153,7 +153,7 @@ def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
     return worst > VIOLATION_TOL
 
 
-@kernel
+@kernel_inlined
 def motion_stage(
     kin: Kinematics,
     Minv: Mat,
@@ -267,7 +267,7 @@ class SaturationInputs(NamedTuple):
         )
 
 
-@kernel
+@kernel_inlined
 def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinematics, a_max: Vec) -> None:
     """Write the saturation step's inputs into ``sat`` (the rows of :class:`SaturationInputs`)."""
     n = kin.q.shape[0]
@@ -281,7 +281,7 @@ def fill_saturation_inputs(sat: SaturationInputs, o: MotionOutput, kin: Kinemati
     sat.wall[:] = o.env_wall
 
 
-@kernel
+@kernel_inlined
 def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
                      p: TickParams) -> tuple[bool, Mat, np.ndarray, bool]:
     """Step 7 when the desired acceleration breaks a limit: the box and envelope met with the RCM task kept
@@ -308,7 +308,7 @@ def saturation_stage(sat: SaturationInputs, Minv: Mat, q: Vec, dq: Vec,
 MotionTail = tuple[Mat, Mat, int, float, int, bool, bool, bool, bool]  # what motion_tail returns (its docstring)
 
 
-@kernel
+@kernel_inlined
 def motion_tail(
     kin: Kinematics, geo: TaskGeometry, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec, has_tactile: bool,
     points: Mat, extra_W: Mat, extra_points: Mat, extra_D: Mat, extra_task_F: Vec, ddq_ref: Vec, stopping: bool,
@@ -350,7 +350,7 @@ def motion_tail(
     return W, ref, at_mask, o.delta, o.contacts, o.non_finite, admitted, saturated, clamped
 
 
-@kernel
+@kernel_inlined
 def tick_front(
     terms: KinematicTerms, rcm: AdaptiveState, adaptive: AdaptiveParams, ext_force: Vec, has_ext: bool, offsets: Vec,
     R_measured: Mat, p_measured: Vec, has_measured: bool, ft_force: Vec, ft_torque: Vec, has_ft: bool, tactile: Vec,

@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from lapwrench.config import EnvelopeConfig
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.motion.saturation import LimitRows
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec, cross3, inner, matvec
@@ -131,7 +131,7 @@ def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     return math.atan2(inner(cross3(x0s, x), d), inner(x0s, x))
 
 
-@kernel
+@kernel_inlined
 def envelope_rows(
     kin: Kinematics, p_R: Vec, a_d: Vec, depth_offset: float, R_E0: Mat, p: EnvelopeParams, length: float, dt: float
 ) -> tuple[Mat, Vec, Vec, Vec, np.ndarray]:

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel_inlined
 from lapwrench.rcm.geometry import insertion_depth, rcm_error
 from lapwrench.robot.model import Kinematics, RobotModel, ScopeAxis
 from lapwrench.spatial import Mat, Vec, all_finite, inner
@@ -29,7 +29,7 @@ NO_AXIS = ScopeAxis(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.diag([1.0, 1.0, 0
 NO_PLACEMENT = (np.asfortranarray(np.eye(3)), np.zeros(3))
 
 
-@kernel
+@kernel_inlined
 def feedback_step(
     offsets: Vec, measured: ScopeAxis, has_measured: bool, kin: Kinematics | ScopeAxis, p_R: Vec, e_R: Vec,
     length: float, gain: float, cap: float,

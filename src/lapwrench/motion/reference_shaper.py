@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.robot.limits import JointLimits
 from lapwrench.spatial import Vec, all_finite
 
@@ -51,7 +51,7 @@ def reachable_acceleration(headroom: float, j_max: float, dt: float) -> float:
     return headroom / dt
 
 
-@kernel
+@kernel_inlined
 def acceleration_bounds(
     q: Vec, dq: Vec, ddq: Vec, q_lo: Vec, q_hi: Vec, v_max: Vec, a_max: Vec, j_max: Vec, dt: float
 ) -> tuple[Vec, Vec]:
@@ -75,7 +75,7 @@ def acceleration_bounds(
     return a_lo, a_hi
 
 
-@kernel
+@kernel_inlined
 def advance_reference(
     q: Vec, dq: Vec, a: Vec, a_lo: Vec, a_hi: Vec, dt: float
 ) -> tuple[Vec, Vec, Vec, bool]:

@@ -22,14 +22,14 @@ from typing import Literal
 import numpy as np
 
 from lapwrench.allocation import nullspace_projector, weighted_pseudo_inverse
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel_inlined
 from lapwrench.robot.model import Kinematics
 from lapwrench.spatial import Mat, Vec, lu_solve_in_place, matmul
 
 Integrator = Literal["semi_implicit", "explicit"]  # motion.integrator
 
 
-@kernel
+@kernel_inlined
 def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     """N_Eᵀ = I - J_Eᵀ Λ_E J_E M⁻¹, Λ_E = (J_E M⁻¹ J_Eᵀ)⁻¹: keeps the part of a torque that leaves {E} still.
 
@@ -45,7 +45,7 @@ def self_motion_projector(kin: Kinematics, Minv: Mat) -> Mat:
     return nullspace_projector(weighted_pseudo_inverse(J, Minv).T, J.T)
 
 
-@kernel
+@kernel_inlined
 def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     """Damping matrix B_s of the arm's self-motion: τ_s = -B_s θ̇, B_s = d N_Eᵀ M = d M N_E.
 
@@ -61,7 +61,7 @@ def self_motion_damping(kin: Kinematics, N_E_T: Mat, rate: float) -> Mat:
     return matmul(N_E_T, kin.M, rate)  # (d N_Eᵀ) M
 
 
-@kernel
+@kernel_inlined
 def add_self_motion_torque(tau: Vec, N_E_T: Mat, push: Vec, B_self: Mat, dq: Vec) -> None:
     """τ += N_Eᵀ τ_push - B_s θ̇ in place: a torque through the self-motion projector (e.g. the joint-limit
     push, :func:`joint_limit_torque`) and the self-motion damping (:func:`self_motion_damping`)."""
@@ -74,7 +74,7 @@ def add_self_motion_torque(tau: Vec, N_E_T: Mat, push: Vec, B_self: Mat, dq: Vec
         tau[i] = tau[i] + pushed - damped
 
 
-@kernel
+@kernel_inlined
 def damping_jacobian(J_R: Mat, Kd: float, N_r: Mat, J_G: Mat, D: Mat, B_self: Mat) -> Mat:
     """B = J_Rᵀ K_d J_R + N_rᵀ J_Gᵀ D J_G + B_s: the θ̇-Jacobian of -τ, for the semi-implicit step.
 
@@ -89,7 +89,7 @@ def damping_jacobian(J_R: Mat, Kd: float, N_r: Mat, J_G: Mat, D: Mat, B_self: Ma
     return B
 
 
-@kernel
+@kernel_inlined
 def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: float) -> Vec:
     """-k ∇H(q), H = ½ Σ_i (distance of q_i into the ``zone`` next to either limit)²: a push away
     from each joint limit that is zero outside the zone and grows linearly inside it (N m).
@@ -104,7 +104,7 @@ def joint_limit_torque(q: Vec, lower: Vec, upper: Vec, zone: float, stiffness: f
     return tau
 
 
-@kernel
+@kernel_inlined
 def euler_velocity_step(
     kin: Kinematics,
     tau: Vec,

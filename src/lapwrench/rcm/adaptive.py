@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from lapwrench.config import AdaptiveRcmConfig
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.shaping import RampVariant, sine_ramp
 from lapwrench.spatial import Mat, Vec, inner, matvec
 
@@ -97,7 +97,7 @@ class AdaptiveState(NamedTuple):
         return AdaptiveState(p, p.copy(), np.zeros(3), np.zeros(6), scalars)
 
 
-@kernel
+@kernel_inlined
 def residual_force(F_s: Vec, F_m: Vec) -> Vec:
     """Eq (19), per axis: ΔF = F_s - F_m (both in {B}; see the module docstring for signs)."""
     return F_s - F_m
@@ -195,7 +195,7 @@ def gate_weight(st: AdaptiveState, P: Mat, twist: Vec, dt: float, p: AdaptivePar
     return sc[0]
 
 
-@kernel
+@kernel_inlined
 def adaptive_rcm_step(
     st: AdaptiveState, P: Mat, residual: Vec, has_residual: bool, twist: Vec, dt: float, p: AdaptiveParams
 ) -> Vec:

@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.robot.model import Kinematics, ScopeAxis
 from lapwrench.spatial import Mat, Vec, inner, matmul, matvec, skew
 
@@ -36,7 +36,7 @@ def initial_rcm_point(kin: Kinematics | ScopeAxis, length: float, lambda0: float
     return kin.p_E + lambda0 * length * kin.d_z
 
 
-@kernel
+@kernel_inlined
 def rcm_error(kin: Kinematics | ScopeAxis, p_R: Vec) -> Vec:
     """Eq (27): e_R = P(θ) (p_R - p_E(θ)), the lateral offset of p_R from the scope axis."""
     P, p_E = kin.P, kin.p_E
@@ -74,7 +74,7 @@ def axis_rcm_error_and_depth(p_E: Vec, d_z: Vec, P: Mat, p_R: Vec, length: float
     return math.sqrt(inner(e, e)), insertion_depth(axis, p_R, length)
 
 
-@kernel
+@kernel_inlined
 def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """Eq (28): J_R = ∂e_R/∂θ (3 x n), analytic.
 
@@ -93,7 +93,7 @@ def rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return ((d @ r) * Sd + np.outer(d, r @ Sd)) @ J_w - kin.P @ J_v
 
 
-@kernel
+@kernel_inlined
 def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     """P J_R = (d_zᵀ r) [d_z]x J_Eω - P J_Ev: the RCM Jacobian restricted to the lateral plane.
 
@@ -117,13 +117,13 @@ def lateral_rcm_jacobian(kin: Kinematics, p_R: Vec) -> Mat:
     return J
 
 
-@kernel
+@kernel_inlined
 def lateral_task(R_E: Mat, J_R: Mat) -> Mat:
     """The lateral RCM task J = [x_E  y_E]ᵀ J_R (2 x n): the RCM error's two rates across the shaft."""
     return matmul(R_E[:, :2].T, J_R)
 
 
-@kernel
+@kernel_inlined
 def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     """ė_R = J_R θ̇ + P ṗ_R: the joint-motion part (eq 28) plus the motion of the adaptive point."""
     rate = matvec(J_R, kin.dq)
@@ -135,7 +135,7 @@ def rcm_error_rate(kin: Kinematics, J_R: Mat, rcm_velocity: Vec) -> Vec:
     return rate
 
 
-@kernel
+@kernel_inlined
 def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
     """ë_R when θ̈ = 0 and p̈_R = 0: the velocity-product part of the RCM error's acceleration,
     ë_R = J_R θ̈ + (this), which eq (2) leaves uncompensated (:func:`lapwrench.wrenches.rcm.rcm_feedforward`).
@@ -161,21 +161,21 @@ def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
     return -a - c_ddot * d - 2.0 * c_dot * d_dot - c * d_ddot
 
 
-@kernel
+@kernel_inlined
 def closest_point_parameter(kin: Kinematics | ScopeAxis, p_R: Vec, length: float) -> float:
     """Eqs (29)-(30): s = d_zᵀ (p_R - p_E) / L, clamped to [0, 1]."""
     s = _axial(kin, p_R) / length
     return min(1.0, max(0.0, s))
 
 
-@kernel
+@kernel_inlined
 def closest_point(kin: Kinematics | ScopeAxis, s_star: float, length: float) -> tuple[Vec, Vec]:
     """Eqs (31)-(32): p_G = p_E + s* L d_z and its offset o_G = s* L d_z."""
     o_G = s_star * length * kin.d_z
     return kin.p_E + o_G, o_G
 
 
-@kernel
+@kernel_inlined
 def closest_point_jacobian(kin: Kinematics, o_G: Vec) -> Mat:
     """Eqs (34)-(36): J_G = [J_Eω; J_Ev - [o_G]x J_Eω] with s* frozen (6 x n)."""
     S = skew(o_G)

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.spatial import Mat, Vec
 from lapwrench.wrenches.grip_weight import without_grip_weight
 from lapwrench.wrenches.interaction import contact_count
@@ -82,7 +82,7 @@ def zero_step(zero: Vec, force: Vec, torque: Vec, gain: float) -> bool:
     return True
 
 
-@kernel
+@kernel_inlined
 def conditioned_ft(
     force: Vec, torque: Vec, R_H: Mat, R_H0: Mat, grip_mass: float, grip_com: Vec, zero: Vec, gain: float,
     tactile: Vec, has_tactile: bool, contact_threshold: float,

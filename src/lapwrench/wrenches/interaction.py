@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.spatial import Mat, Vec, Wrench, matvec
 from lapwrench.wrenches.base import Cue, TickContext
 
@@ -25,7 +25,7 @@ def contact_count(values: Vec, contact_threshold: float = 0.0) -> int:
     return n_c
 
 
-@kernel
+@kernel_inlined
 def grip_gain(values: Vec, k_H: float, k_min: int, contact_threshold: float = 0.0) -> tuple[float, int]:
     """Eq (7): δ = Σ Se_j / k_H if n_c > k_min else 0; returns (δ, n_c), n_c by :func:`contact_count`."""
     n_c = contact_count(values, contact_threshold)
@@ -34,7 +34,7 @@ def grip_gain(values: Vec, k_H: float, k_min: int, contact_threshold: float = 0.
     return np.sum(values) / k_H, n_c
 
 
-@kernel
+@kernel_inlined
 def interaction_wrench(force_H: Vec, torque_H: Vec, R_H: Mat, delta: float) -> tuple[Vec, Vec]:
     """Eq (6): W_h = δ [M_s^z z_H; F_s^x x_H + F_s^y y_H + F_s^z z_H] in {B}.
 

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from lapwrench.allocation import weighted_pseudo_inverse
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel_inlined
 from lapwrench.rcm.geometry import lateral_rcm_jacobian, rcm_error_drift
 from lapwrench.robot.model import Kinematics, inverse_inertia
 from lapwrench.spatial import Mat, Vec, Wrench, matvec
 from lapwrench.wrenches.base import Cue, TickContext
 
 
-@kernel
+@kernel_inlined
 def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     """Eq (14): F_r = -K_p e_R - K_d ė_R, with K_p = Kp I3 and K_d = Kd I3."""
     F = np.empty(3)
@@ -22,7 +22,7 @@ def rcm_force(e_R: Vec, e_R_rate: Vec, Kp: float, Kd: float) -> Vec:
     return F
 
 
-@kernel
+@kernel_inlined
 def rcm_feedforward(kin: Kinematics, Minv: Mat, J_lat: Mat, J_lat_pinv: Mat, drift: Vec) -> Vec:
     """F_ff = -Λ_R (μ - J_R M⁻¹ C θ̇) at p_R: the force that cancels the velocity-product terms of the
     RCM error's acceleration (a departure from eq 2, which has none; ``rcm.feedforward: false`` is the paper's).

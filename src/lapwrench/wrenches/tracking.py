@@ -8,7 +8,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from lapwrench.config import CameraConfig, Config, TrackingConfig
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.shaping import RampVariant, sine_ramp
 from lapwrench.spatial import Mat, Vec, Wrench, cross3, inner
 from lapwrench.wrenches.base import Cue, TickContext
@@ -94,7 +94,7 @@ def tracking_direction(ray: Vec, z_C: Vec, variant: TrackingDirection = "printed
     return w
 
 
-@kernel
+@kernel_inlined
 def virtual_force(points: Mat, p: TrackingParams, R_C: Mat) -> Vec:
     """Eq (8), force part: F_c = Σ F_v(d_i) V_i over the n_s detected instruments (0 if n_s = 0),
     scaled down to |F_c| <= F_sum_max when the sum exceeds it (a departure from the printed eq 8: the
