@@ -57,14 +57,20 @@ def cross3(a: Vec, b: Vec) -> Vec:
 def matvec(A: Mat, x: Vec) -> Vec:
     """A x, in a loop: numba's ``@`` calls BLAS, whose call costs more than the arithmetic for the
     tick's small matrices (0.3 µs against 0.05 µs for 3 x 3)."""
+    y = np.empty(A.shape[0])
+    matvec_into(A, x, y)
+    return y
+
+
+@kernel
+def matvec_into(A: Mat, x: Vec, y: Vec) -> None:
+    """y = A x (:func:`matvec`) written into ``y``, which must not share memory with ``x``."""
     m, n = A.shape
-    y = np.empty(m)
     for i in range(m):
         acc = 0.0
         for j in range(n):
             acc += A[i, j] * x[j]
         y[i] = acc
-    return y
 
 
 @kernel
@@ -140,10 +146,10 @@ def cholesky_inverse(A: Mat) -> tuple[Mat, bool]:
     The result is exactly symmetric.
     """
     n = A.shape[0]
-    L = np.zeros((n, n))
+    work = np.zeros((2, n, n))  # L and X = L⁻¹ (lower triangular) in one allocation
+    L, X = work[0], work[1]
     if not cholesky_factor(A, L, 0.0):
         return np.zeros((n, n)), False
-    X = np.zeros((n, n))  # L⁻¹, lower triangular
     for j in range(n):
         X[j, j] = 1.0 / L[j, j]
         for i in range(j + 1, n):

@@ -40,7 +40,7 @@ from lapwrench.motion.envelope import envelope_rows
 from lapwrench.motion.measured_feedback import feedback_step
 from lapwrench.motion.qp import QP_INFEASIBLE, QP_SOLVED
 from lapwrench.motion.reference_shaper import acceleration_bounds, advance_reference
-from lapwrench.motion.saturation import VIOLATION_TOL, at_bound, solve_exact, solve_relaxed
+from lapwrench.motion.saturation import at_bound, solve_exact, solve_relaxed, violated
 from lapwrench.motion.virtual_model import (
     add_self_motion_torque,
     damping_jacobian,
@@ -70,7 +70,7 @@ from lapwrench.robot.model import (
     inverse_inertia,
     scope_axis,
 )
-from lapwrench.spatial import Mat, Vec, all_finite, matvec
+from lapwrench.spatial import Mat, Vec, all_finite, matvec, matvec_into
 from lapwrench.tick_params import TickParams
 from lapwrench.wrenches.ft_zero import FtTare, conditioned_ft
 from lapwrench.wrenches.interaction import grip_gain, interaction_wrench
@@ -97,17 +97,19 @@ def geometry_stage(
     """
     twist = matvec(kin.J_E, kin.dq)
     F_lat = adaptive_rcm_step(rcm, kin.P, residual, has_residual, twist, p.dt, adaptive)
-    p_R = rcm.p_R.copy()
+    snap = np.empty((3, 3))  # p_R, its velocity and e_R's offset as they are now: rows of one array
+    p_R, velocity, e_R_offset = snap[0], snap[1], snap[2]
+    p_R[:] = rcm.p_R
     axis = ScopeAxis(kin.p_E, kin.d_z, kin.P)  # for what reads only these: 2 atomic refcounts per array handed on
     e_R = rcm_error(axis, p_R)
     feedback_step(offsets, measured, has_measured, axis, p_R, e_R, p.length, p.feedback_gain, p.feedback_cap)
     J_R = lateral_rcm_jacobian(kin, p_R) if p.lateral else rcm_jacobian(kin, p_R)
     s_star = closest_point_parameter(axis, p_R, p.length)
     p_G, o_G = closest_point(axis, s_star, p.length)
-    velocity = rcm.velocity.copy()
+    velocity[:], e_R_offset[:] = rcm.velocity, offsets[:3]
     geo = TaskGeometry(
         p_R, velocity, e_R, rcm_error_rate(kin, J_R, velocity), J_R, s_star, p_G, o_G,
-        closest_point_jacobian(kin, o_G), offsets[:3].copy(),
+        closest_point_jacobian(kin, o_G), e_R_offset,
     )
     return geo, F_lat
 
@@ -145,15 +147,6 @@ def null_brake(J_task: Mat, Minv: Mat, dq: Vec, stop_time: float) -> Vec:
 
 
 @kernel_inlined
-def _violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
-    """True if some row's violation exceeds the round-off tolerance (motion/saturation.py)."""
-    worst = -np.inf
-    for i in range(y.shape[0]):
-        worst = max(worst, max(lo[i] - y[i], y[i] - hi[i]) / scale[i])
-    return worst > VIOLATION_TOL
-
-
-@kernel_inlined
 def motion_stage(
     kin: Kinematics,
     Minv: Mat,
@@ -179,7 +172,8 @@ def motion_stage(
     matrices (eq 40's form, 6 x 6), and the task-space cues' summed force at p_R."""
     # 4. wrenches (eq 5-14, 40), each in {B} about its own point; the paper's cues the config switched on
     J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
-    W_r = np.zeros(6)
+    W = np.zeros((4, 6))  # W_r, W_h, W_c, W_f as rows of one array: one allocation
+    W_r, W_h, W_c, W_f = W[0], W[1], W[2], W[3]
     W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
     if p.rcm_feedforward:  # across the shaft only, whichever form of the task (wrenches/rcm.py)
         J_lat = geo.J_R if p.lateral else lateral_rcm_jacobian(kin, geo.p_R)
@@ -188,14 +182,14 @@ def motion_stage(
     delta, contacts = 0.0, 0
     if has_tactile:
         delta, contacts = grip_gain(tactile, p.k_H, p.k_min, p.contact_threshold)
-    W_h = np.zeros(6)
     if p.cue_interaction and has_ft and delta != 0.0:
         W_h[:3], W_h[3:] = interaction_wrench(ft_force, ft_torque, kin.R_H, delta)
-    W_c = np.zeros(6)
     if p.cue_tracking:
         W_c[3:] = virtual_force(points, p.tracking, kin.R_C)
     D = (p.D_guided if delta > 0.0 else p.D_unguided) if p.cue_viscous else np.zeros((6, 6))
-    W_f = -matvec(D, matvec(geo.J_G, kin.dq))
+    matvec_into(D, matvec(geo.J_G, kin.dq), W_f)
+    for i in range(6):
+        W_f[i] = -W_f[i]  # -D J_G θ̇
 
     # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
     n_extra = extra_W.shape[0]
@@ -210,9 +204,8 @@ def motion_stage(
     tau_n = np.zeros(kin.q.shape[0]) if stopping else nullspace_torque(geo.J_G, W_n)
     N_E_T = self_motion_projector(kin, Minv)
     B_self = self_motion_damping(kin, N_E_T, p.self_motion_damping)
-    push = np.zeros(kin.q.shape[0])
-    if p.joint_limit_stiffness != 0.0:
-        push = joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
+    push = (joint_limit_torque(kin.q, p.q_lo, p.q_hi, p.joint_limit_zone, p.joint_limit_stiffness)
+            if p.joint_limit_stiffness != 0.0 else np.zeros(kin.q.shape[0]))
     tau = task_priority_torque(geo.J_R, W_r[3:] + extra_task_F, N_r, tau_n)
     add_self_motion_torque(tau, N_E_T, push, B_self, kin.dq)
 
@@ -230,12 +223,12 @@ def motion_stage(
     J_task = lateral_task(kin.R_E, geo.J_R)
     if stopping:
         a_d = a_d - null_brake(J_task, Minv, kin.dq, p.stop_time)
-    admitted = not _violated(a_lo, a_hi, a_d, p.a_max)
+    admitted = not violated(a_lo, a_hi, a_d, p.a_max)
     if p.envelope_enabled:
         env_W, env_lo, env_hi, env_scale, env_wall = envelope_rows(
             kin, geo.p_R, a_d, depth_offset, R_E0, p.envelope, p.length, p.dt
         )
-        admitted = admitted and not _violated(env_lo, env_hi, matvec(env_W, matvec(kin.J_E, a_d)), env_scale)
+        admitted = admitted and not violated(env_lo, env_hi, matvec(env_W, matvec(kin.J_E, a_d)), env_scale)
     else:
         env_W, env_lo, env_hi = np.zeros((4, 6)), np.zeros(4), np.zeros(4)
         env_scale, env_wall = np.ones(4), np.zeros(4, dtype=np.int64)
@@ -389,11 +382,13 @@ def tick_stage(
 
     Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
     """
+    no_cues = np.zeros(6 * 6 + 3)  # the Python cues' (none) rows, damping and task force: one allocation
     kin, geo, F_lat, residual, has_residual, force, torque = tick_front(terms, rcm, adaptive, ext_force, has_ext,
         offsets, R_measured, p_measured, has_measured, ft_force, ft_torque, has_ft, tactile, has_tactile, tare, p)
     W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
-        kin, geo, force, torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
-        np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,
+        kin, geo, force, torque, has_ft, tactile, has_tactile, points, no_cues[:0].reshape((0, 6)),
+        no_cues[:0].reshape((0, 3)), no_cues[:36].reshape((6, 6)), no_cues[36:], ddq_ref, stopping, R_E0, offsets[3],
+        may_admit, sat, p,
     )
     vec3 = np.empty((5, 3))
     vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = geo.e_R, geo.p_R, geo.p_G, F_lat, residual

@@ -101,8 +101,9 @@ def insertion_rate_weights(d: Vec, r: Vec) -> Vec:
     (The motion of the adaptive point p_R is left out: it is slow and not the arm's doing.)
     """
     w = np.empty(6)
-    w[:3] = -cross3(d, r)
-    w[3:] = d
+    d_x_r = cross3(d, r)
+    for i in range(3):
+        w[i], w[i + 3] = -d_x_r[i], d[i]
     return w
 
 
@@ -176,7 +177,8 @@ def envelope_rows(
     w_pos = wall_speed(p.roll_range - roll - max(y[3], 0.0) * T, a_w, r_max)
     w_neg = wall_speed(roll + p.roll_range + min(y[3], 0.0) * T, a_w, r_max)
     p_max = p.pivot_speed_max
-    lo, hi = np.empty(4), np.empty(4)
+    bounds = np.empty((2, 4))  # rows lo, hi: one allocation
+    lo, hi = bounds[0], bounds[1]
     lo[0], hi[0] = rate_row_bounds(y[0], -v_out, v_in, a_in, dt)
     lo[1], hi[1] = rate_row_bounds(y[1], -p_max, p_max, a_w, dt)
     lo[2], hi[2] = rate_row_bounds(y[2], -p_max, p_max, a_w, dt)

@@ -48,14 +48,13 @@ def feedback_step(
         d_t = insertion_depth(measured, p_R, length) - insertion_depth(kin, p_R, length)
         if all_finite(e_t) and math.isfinite(d_t):
             e_target, d_target = e_t, d_t
-    e = np.empty(3)
+    e = offsets[:3]  # stepped in place
     for i in range(3):
         e[i] = offsets[i] + gain * (e_target[i] - offsets[i])
     n = math.sqrt(inner(e, e))
     if n > cap:
         for i in range(3):
             e[i] = e[i] * (cap / n)
-    offsets[:3] = e
     d = offsets[3] + gain * (d_target - offsets[3])
     offsets[3] = min(cap, max(-cap, d))
 

@@ -62,7 +62,8 @@ def acceleration_bounds(
     acceleration inside it that keeps the RCM task.
     """
     n = q.shape[0]
-    a_lo, a_hi = np.empty(n), np.empty(n)
+    bounds = np.empty((2, n))  # rows a_lo, a_hi: one allocation
+    a_lo, a_hi = bounds[0], bounds[1]
     for i in range(n):  # joint by joint: scalars, no temporary arrays
         down, up = braking_speeds(q[i] + dq[i] * dt, q_lo[i], q_hi[i], v_max[i], a_max[i])  # braking at half a_max
         lo = -reachable_acceleration(down + dq[i], j_max[i], dt)
@@ -84,7 +85,8 @@ def advance_reference(
     if not all_finite(a):
         a = -dq / dt  # never propagate a NaN: brake instead
     n = q.shape[0]
-    q_next, dq_next, a_clip = np.empty(n), np.empty(n), np.empty(n)
+    rows = np.empty((3, n))  # q⁺, q̇⁺, the clipped acceleration: one allocation
+    q_next, dq_next, a_clip = rows[0], rows[1], rows[2]
     change, size = 0.0, 0.0  # max |a_clip - a|, max |a|
     for i in range(n):
         a_clip[i] = np.minimum(np.maximum(a[i], a_lo[i]), a_hi[i])

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import quadprog
 
-from lapwrench.jit import kernel
+from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.motion.qp import QP_INFEASIBLE, QP_NUMERICAL, QP_SOLVED, dual_active_set
 from lapwrench.spatial import Mat, Vec, inner
 
@@ -118,6 +118,15 @@ class SaturationResult:
 def _violations(rows: LimitRows, a: Vec) -> Vec:
     """Each row's violation, normalised by its scale (<= 0: satisfied)."""
     return row_violations(rows.C, rows.lo, rows.hi, rows.scale, np.ascontiguousarray(a, dtype=np.float64))
+
+
+@kernel_inlined
+def violated(lo: Vec, hi: Vec, y: Vec, scale: Vec) -> bool:
+    """True if some row's scaled violation exceeds :data:`VIOLATION_TOL` (:func:`row_violations` without its array)."""
+    worst = -np.inf
+    for i in range(y.shape[0]):
+        worst = max(worst, max(lo[i] - y[i], y[i] - hi[i]) / scale[i])
+    return worst > VIOLATION_TOL
 
 
 @kernel

@@ -12,7 +12,7 @@ import numpy as np
 
 from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.robot.model import Kinematics, ScopeAxis
-from lapwrench.spatial import Mat, Vec, inner, matmul, matvec, skew
+from lapwrench.spatial import Mat, Vec, cross3, inner, matmul, matvec, skew
 
 
 class TaskGeometry(NamedTuple):
@@ -153,12 +153,18 @@ def rcm_error_drift(kin: Kinematics, p_R: Vec, rcm_velocity: Vec) -> Vec:
     alpha, a = kin.a_E[:3], kin.a_E[3:]
     r = p_R - kin.p_E
     r_dot = rcm_velocity - v
-    d_dot = np.cross(w, d)
-    d_ddot = np.cross(alpha, d) + np.cross(w, d_dot)
+    d_dot = cross3(w, d)  # np.cross's formula, without its temporaries (three arrays a call in numba)
+    d_ddot = cross3(alpha, d)
+    w_x_d_dot = cross3(w, d_dot)
+    for i in range(3):
+        d_ddot[i] += w_x_d_dot[i]  # α x d + ω x ḋ
     c = inner(d, r)
     c_dot = inner(d_dot, r) + inner(d, r_dot)
     c_ddot = inner(d_ddot, r) + 2.0 * inner(d_dot, r_dot) - inner(d, a)
-    return -a - c_ddot * d - 2.0 * c_dot * d_dot - c * d_ddot
+    drift = np.empty(3)
+    for i in range(3):
+        drift[i] = -a[i] - c_ddot * d[i] - 2.0 * c_dot * d_dot[i] - c * d_ddot[i]
+    return drift
 
 
 @kernel_inlined

@@ -9,7 +9,7 @@ from lapwrench.allocation import weighted_pseudo_inverse
 from lapwrench.jit import kernel_inlined
 from lapwrench.rcm.geometry import lateral_rcm_jacobian, rcm_error_drift
 from lapwrench.robot.model import Kinematics, inverse_inertia
-from lapwrench.spatial import Mat, Vec, Wrench, matvec
+from lapwrench.spatial import Mat, Vec, Wrench, matvec, matvec_into
 from lapwrench.wrenches.base import Cue, TickContext
 
 
@@ -46,8 +46,17 @@ def rcm_feedforward(kin: Kinematics, Minv: Mat, J_lat: Mat, J_lat_pinv: Mat, dri
     c = np.empty(n)
     for i in range(n):
         c[i] = kin.nle[i] - kin.gravity[i]  # C θ̇
-    mu = drift - matvec(J_lat, matvec(Minv, c))
-    return -matvec(J_lat_pinv.T, matvec(kin.M, matvec(J_lat_pinv, mu)))
+    Minv_c = matvec(Minv, c)
+    mu = matvec(J_lat, Minv_c)
+    for i in range(mu.shape[0]):
+        mu[i] = drift[i] - mu[i]  # μ
+    # -J⁺ᵀ M J⁺ μ, the products' vectors written into the two n-vectors no longer needed (c, M⁻¹ c)
+    matvec_into(J_lat_pinv, mu, c)
+    matvec_into(kin.M, c, Minv_c)
+    F = matvec(J_lat_pinv.T, Minv_c)
+    for i in range(F.shape[0]):
+        F[i] = -F[i]
+    return F
 
 
 class RcmCue(Cue):
