@@ -47,10 +47,16 @@ def wrench_transform(p_from: Vec, p_to: Vec) -> Mat:
 def cross3(a: Vec, b: Vec) -> Vec:
     """a x b for two 3-vectors, written out (numba's ``np.cross`` broadcasts and costs twice as much)."""
     out = np.empty(3)
+    cross3_into(a, b, out)
+    return out
+
+
+@kernel
+def cross3_into(a: Vec, b: Vec, out: Vec) -> None:
+    """out = a x b (:func:`cross3`) written into ``out``, which must not share memory with ``a`` or ``b``."""
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
-    return out
 
 
 @kernel

@@ -24,7 +24,7 @@ from lapwrench.config import EnvelopeConfig
 from lapwrench.jit import kernel, kernel_inlined
 from lapwrench.motion.saturation import LimitRows
 from lapwrench.robot.model import Kinematics
-from lapwrench.spatial import Mat, Vec, cross3, inner, matvec
+from lapwrench.spatial import Mat, Vec, cross3, cross3_into, inner, matvec
 
 # Time constant (s) with which a rate approaches its envelope limit.
 APPROACH_TIME = 0.01
@@ -101,9 +101,9 @@ def insertion_rate_weights(d: Vec, r: Vec) -> Vec:
     (The motion of the adaptive point p_R is left out: it is slow and not the arm's doing.)
     """
     w = np.empty(6)
-    d_x_r = cross3(d, r)
+    cross3_into(d, r, w[:3])
     for i in range(3):
-        w[i], w[i + 3] = -d_x_r[i], d[i]
+        w[i], w[i + 3] = -w[i], d[i]
     return w
 
 
@@ -123,13 +123,15 @@ def roll_angle(R_E: Mat, R_E0: Mat) -> float:
     c = 1.0 + inner(d0, d)
     if c < ANTIPARALLEL:
         return math.atan2(inner(cross3(x0, x), d), inner(x0, x))
-    k = cross3(d0, d)
-    kx0 = cross3(k, x0)
-    kkx0 = cross3(k, kx0)
-    x0s = np.empty(3)
+    work = np.empty((5, 3))  # the vectors below as rows of one array: one allocation
+    k, kx0, kkx0, x0s, x0s_x = work[0], work[1], work[2], work[3], work[4]
+    cross3_into(d0, d, k)
+    cross3_into(k, x0, kx0)
+    cross3_into(k, kx0, kkx0)
     for i in range(3):
         x0s[i] = x0[i] + kx0[i] + kkx0[i] / c
-    return math.atan2(inner(cross3(x0s, x), d), inner(x0s, x))
+    cross3_into(x0s, x, x0s_x)
+    return math.atan2(inner(x0s_x, d), inner(x0s, x))
 
 
 @kernel_inlined
@@ -153,17 +155,15 @@ def envelope_rows(
     if inner(w, w) - wd * wd < 1e-12:
         w = matvec(kin.J_E[:3], kin.dq + dt * a_d)
         wd = inner(w, d)
-    u1 = np.empty(3)  # u = w - (w·d) d, then normalised in place
+    W = np.zeros((4, 6))
+    W[0] = insertion_rate_weights(d, r)
+    u1, u2 = W[1, :3], W[2, :3]  # written in their rows
     for i in range(3):
-        u1[i] = w[i] - wd * d[i]
+        u1[i] = w[i] - wd * d[i]  # u = w - (w·d) d, then normalised in place
     n = math.sqrt(inner(u1, u1))
     for i in range(3):
         u1[i] = u1[i] / n if n > 1e-9 else kin.R_E[i, 0]
-    u2 = cross3(d, u1)
-    W = np.zeros((4, 6))
-    W[0] = insertion_rate_weights(d, r)
-    W[1, :3] = u1
-    W[2, :3] = u2
+    cross3_into(d, u1, u2)
     W[3, :3] = d
     y = matvec(W, twist)
     # position walls: the room left once the rate has followed its bound (it lags by T)
