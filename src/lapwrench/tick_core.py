@@ -172,7 +172,8 @@ def motion_stage(
     matrices (eq 40's form, 6 x 6), and the task-space cues' summed force at p_R."""
     # 4. wrenches (eq 5-14, 40), each in {B} about its own point; the paper's cues the config switched on
     J_pinv = weighted_pseudo_inverse(geo.J_R, Minv, kin.d_z) if p.lateral else weighted_pseudo_inverse(geo.J_R, Minv)
-    W = np.zeros((4, 6))  # W_r, W_h, W_c, W_f as rows of one array: one allocation
+    n_extra = extra_W.shape[0]
+    W = np.zeros((4 + n_extra, 6))  # W_r, W_h, W_c, W_f, then the Python cues' wrenches: one allocation
     W_r, W_h, W_c, W_f = W[0], W[1], W[2], W[3]
     W_r[3:] = rcm_force(geo.e_R + geo.e_R_offset, geo.e_R_rate, p.Kp, p.Kd)
     if p.rcm_feedforward:  # across the shaft only, whichever form of the task (wrenches/rcm.py)
@@ -192,10 +193,8 @@ def motion_stage(
         W_f[i] = -W_f[i]  # -D J_G θ̇
 
     # 5. task/null-space allocation (eq 2-4, 37-39) and the self-motion
-    n_extra = extra_W.shape[0]
-    W_all = np.zeros((3 + n_extra, 6))
+    W_all = W[1:]  # the null-space wrenches (eq 38): W_h, W_c, W_f and the cues' rows
     P_all = np.zeros((3 + n_extra, 3))
-    W_all[0], W_all[1], W_all[2] = W_h, W_c, W_f
     P_all[0], P_all[1], P_all[2] = kin.p_H, kin.p_C, geo.p_G
     W_all[3:] = extra_W
     P_all[3:] = extra_points

@@ -64,14 +64,19 @@ class Kinematics(NamedTuple):
 @kernel
 def scope_axis(R_E: Mat) -> tuple[Vec, Mat]:
     """Eqs (16)-(17): d_z = R_E I_z (the laparoscope direction) and P = I3 - d_z d_zᵀ."""
-    d = np.empty(3)
+    d, P = np.empty(3), np.empty((3, 3))
+    scope_axis_into(R_E, d, P)
+    return d, P
+
+
+@kernel
+def scope_axis_into(R_E: Mat, d: Vec, P: Mat) -> None:
+    """:func:`scope_axis` written into ``d`` and ``P``."""
     for i in range(3):
         d[i] = R_E[i, 2]
-    P = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
             P[i, j] = (1.0 if i == j else 0.0) - d[i] * d[j]
-    return d, P
 
 
 class KinematicTerms(NamedTuple):
@@ -172,10 +177,8 @@ class ScopeAxis(NamedTuple):
 @kernel
 def fill_scope_axis(out: ScopeAxis, R_E: Mat, p_E: Vec) -> None:
     """``out`` = the scope axis (:func:`scope_axis`) of a placement held in Pinocchio's memory."""
-    d_z, P = scope_axis(R_E)
     out.p_E[:] = p_E
-    out.d_z[:] = d_z
-    out.P[:] = P
+    scope_axis_into(R_E, out.d_z, out.P)
 
 
 _F64 = np.dtype(np.float64)  # compared with ==: the tick's reference (numba's cached kernels) has an equal one
