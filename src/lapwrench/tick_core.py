@@ -381,13 +381,11 @@ def tick_stage(
 
     Returns ``vec3`` rows [e_R, p_R, p_G, F_re⊥, ΔF], has ΔF, then what :func:`motion_tail` returns.
     """
-    no_cues = np.zeros(6 * 6 + 3)  # the Python cues' (none) rows, damping and task force: one allocation
     kin, geo, F_lat, residual, has_residual, force, torque = tick_front(terms, rcm, adaptive, ext_force, has_ext,
         offsets, R_measured, p_measured, has_measured, ft_force, ft_torque, has_ft, tactile, has_tactile, tare, p)
     W, ref, at_mask, delta, contacts, non_finite, admitted, saturated, clamped = motion_tail(
-        kin, geo, force, torque, has_ft, tactile, has_tactile, points, no_cues[:0].reshape((0, 6)),
-        no_cues[:0].reshape((0, 3)), no_cues[:36].reshape((6, 6)), no_cues[36:], ddq_ref, stopping, R_E0, offsets[3],
-        may_admit, sat, p,
+        kin, geo, force, torque, has_ft, tactile, has_tactile, points, np.zeros((0, 6)),
+        np.zeros((0, 3)), np.zeros((6, 6)), np.zeros(3), ddq_ref, stopping, R_E0, offsets[3], may_admit, sat, p,
     )
     vec3 = np.empty((5, 3))
     vec3[0], vec3[1], vec3[2], vec3[3], vec3[4] = geo.e_R, geo.p_R, geo.p_G, F_lat, residual
